@@ -1,0 +1,204 @@
+"""Fast time integration of identified models driven by a sampled forcing signal.
+
+Classical fixed-step Runge-Kutta 4 on the sampling grid (optionally with
+sub-steps), the forcing between samples taken from a cubic spline through the
+samples. The integrator is a numba-compiled kernel over a batch of coefficient
+matrices, so a sparsification sweep or a finite-difference gradient is one
+call. A model that leaves ``bound`` or goes non-finite is flagged as diverged,
+its remaining samples are NaN, and nothing is raised.
+
+Accuracy: on the paper's Duffing case (dt = 0.01) this matches a solve_ivp
+(DOP853, rtol = atol = 1e-12) reference to better than 1e-6 (tests/test_simulate.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.interpolate import CubicSpline
+
+from .library import PolynomialForcingLibrary
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """Result of a batch integration.
+
+    x: (B, N, n) states at the sample times (NaN after divergence).
+    diverged: (B,) True where the trajectory left the bound or became non-finite.
+    """
+
+    x: np.ndarray
+    diverged: np.ndarray
+
+
+def _chain(library: PolynomialForcingLibrary) -> tuple[np.ndarray, np.ndarray]:
+    """Each monomial k > 0 as (parent monomial, state): theta[k] = theta[parent] * x[state]."""
+    index = {tuple(p): k for k, p in enumerate(library.powers)}
+    k_poly = library.powers.shape[0]
+    parent = np.zeros(k_poly, dtype=np.int64)
+    var = np.zeros(k_poly, dtype=np.int64)
+    for k in range(1, k_poly):
+        p = library.powers[k].copy()
+        v = int(np.flatnonzero(p)[-1])
+        p[v] -= 1
+        parent[k], var[k] = index[tuple(p)], v
+    return parent, var
+
+
+@njit(cache=True)
+def _rhs(c, parent, var, k_poly, forcing, x, f, theta, out):  # pragma: no cover - compiled
+    theta[0] = 1.0
+    for k in range(1, k_poly):
+        theta[k] = theta[parent[k]] * x[var[k]]
+    if forcing:
+        theta[k_poly] = f
+    n = x.shape[0]
+    for i in range(n):
+        acc = 0.0
+        for k in range(c.shape[0]):
+            ck = c[k, i]
+            if ck != 0.0:
+                acc += ck * theta[k]
+        out[i] = acc
+
+
+@njit(cache=True)
+def _rk4_batch(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound):  # pragma: no cover
+    b, kk, n = coefs.shape
+    n_t = dt.shape[0] + 1
+    out = np.full((b, n_t, n), np.nan)
+    diverged = np.zeros(b, dtype=np.bool_)
+    theta = np.empty(kk)
+    k1 = np.empty(n)
+    k2 = np.empty(n)
+    k3 = np.empty(n)
+    k4 = np.empty(n)
+    xs = np.empty(n)
+    for j in range(b):
+        c = coefs[j]
+        x = x0[j].copy()
+        out[j, 0] = x
+        for i in range(n_t - 1):
+            h = dt[i] / m
+            for s in range(m):
+                f0 = f_stage[i, 2 * s]
+                fm = f_stage[i, 2 * s + 1]
+                f1 = f_stage[i, 2 * s + 2]
+                _rhs(c, parent, var, k_poly, forcing, x, f0, theta, k1)
+                for q in range(n):
+                    xs[q] = x[q] + 0.5 * h * k1[q]
+                _rhs(c, parent, var, k_poly, forcing, xs, fm, theta, k2)
+                for q in range(n):
+                    xs[q] = x[q] + 0.5 * h * k2[q]
+                _rhs(c, parent, var, k_poly, forcing, xs, fm, theta, k3)
+                for q in range(n):
+                    xs[q] = x[q] + h * k3[q]
+                _rhs(c, parent, var, k_poly, forcing, xs, f1, theta, k4)
+                for q in range(n):
+                    x[q] = x[q] + (h / 6.0) * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
+            ok = True
+            for q in range(n):
+                if not (abs(x[q]) <= bound):  # also catches NaN
+                    ok = False
+            if not ok:
+                diverged[j] = True
+                break
+            out[j, i + 1] = x
+    return out, diverged
+
+
+def simulate(
+    library: PolynomialForcingLibrary,
+    coefs: np.ndarray,
+    x0: np.ndarray,
+    t: np.ndarray,
+    forcing: np.ndarray | None = None,
+    *,
+    substeps: int = 1,
+    bound: float = np.inf,
+) -> Simulation:
+    """Integrate dx/dt = Theta(x, F(t)) Xi from ``x0`` over the sample times ``t``.
+
+    coefs: (K, n) for one model or (B, K, n) for a batch. x0: (n,) or (B, n).
+    forcing: samples of F at ``t`` (required when the library has F).
+    bound: a trajectory whose state exceeds this magnitude counts as diverged.
+    """
+    coefs = np.asarray(coefs, dtype=float)
+    single = coefs.ndim == 2
+    if single:
+        coefs = coefs[None]
+    b, k, n = coefs.shape
+    if k != library.n_terms or n != library.n_states:
+        raise ValueError(
+            f"coefficients have shape {(k, n)}, library expects {(library.n_terms, library.n_states)}"
+        )
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1 or t.size < 2:
+        raise ValueError("t must be a 1-D array of at least 2 sample times")
+    dt = np.diff(t)
+    if not np.all(dt > 0):
+        raise ValueError("t must be strictly increasing")
+    x0 = np.broadcast_to(np.asarray(x0, dtype=float), (b, n))
+    if not np.all(np.isfinite(x0)):
+        raise ValueError("initial state contains NaN or inf")
+    m = int(substeps)
+    if m < 1:
+        raise ValueError("substeps must be >= 1")
+
+    # Forcing at every stage time: t_i + j*h/2, j = 0 .. 2m.
+    n_t = t.size
+    if library.forcing:
+        if forcing is None:
+            raise ValueError("this model has a forcing term F: pass the forcing samples")
+        forcing = np.asarray(forcing, dtype=float)
+        if forcing.shape != t.shape:
+            raise ValueError(f"forcing has {forcing.shape[0]} samples, t has {t.size}")
+        if not np.all(np.isfinite(forcing)):
+            raise ValueError("forcing contains NaN or inf")
+        frac = np.arange(2 * m) / (2 * m)
+        t_stage = (t[:-1, None] + dt[:, None] * frac[None]).ravel()
+        f_stage = CubicSpline(t, forcing)(t_stage).reshape(n_t - 1, 2 * m)
+        f_stage = np.concatenate([f_stage, np.r_[forcing[1:]][:, None]], axis=1)
+    else:
+        f_stage = np.zeros((n_t - 1, 2 * m + 1))
+
+    parent, var = _chain(library)
+    res, diverged = _rk4_batch(np.ascontiguousarray(coefs), parent, var, library.powers.shape[0],
+                               library.forcing, np.ascontiguousarray(x0), dt,
+                               np.ascontiguousarray(f_stage), m, float(bound))
+    if single:
+        return Simulation(res[0], diverged[:1])
+    return Simulation(res, diverged)
+
+
+def reference_solution(
+    library: PolynomialForcingLibrary,
+    coefs: np.ndarray,
+    x0: np.ndarray,
+    t: np.ndarray,
+    forcing: np.ndarray | None = None,
+    *,
+    rtol: float = 1e-12,
+    atol: float = 1e-12,
+) -> np.ndarray:
+    """Tight-tolerance scipy ``solve_ivp`` (DOP853) solution with the same spline forcing.
+
+    Slow; the yardstick that :func:`simulate` is tested against.
+    """
+    from scipy.integrate import solve_ivp
+
+    coefs = np.asarray(coefs, dtype=float)
+    spline = CubicSpline(t, forcing) if library.forcing else None
+
+    def rhs(tt, x):
+        f = spline(tt) if spline is not None else None
+        return library.transform(x, f) @ coefs
+
+    sol = solve_ivp(rhs, (t[0], t[-1]), np.asarray(x0, float), t_eval=t,
+                    method="DOP853", rtol=rtol, atol=atol)
+    if not sol.success:
+        raise RuntimeError(f"reference integration failed: {sol.message}")
+    return sol.y.T
