@@ -151,6 +151,22 @@ def spectral(f: np.ndarray, dx: float, cutoff_hz: float | None = None) -> np.nda
     return np.fft.irfft(spec, g.size)[:n]
 
 
+def smooth(x: np.ndarray, window: int, order: int = 3) -> np.ndarray:
+    """Zero-phase Savitzky-Golay smoothing of each column of ``x`` (N,) or (N, n).
+
+    Used to denoise states before they enter the library: noisy states in the
+    regression matrix bias least squares (errors in variables), which a
+    noisy derivative alone does not.
+    """
+    x = np.asarray(x, dtype=float)
+    window = int(window) | 1
+    if window <= order + 1:
+        return x.copy()
+    if x.shape[0] < window:
+        raise ValueError(f"signal has {x.shape[0]} samples, fewer than the smoothing window {window}")
+    return savgol_filter(x, window, order, axis=0, mode="interp")
+
+
 def gradient(f: np.ndarray, dx: float) -> np.ndarray:
     """Second-order central differences, no smoothing."""
     f = _check_signal(f, dx, 3)

@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from scipy.interpolate import CubicSpline
 
 from .library import PolynomialForcingLibrary
@@ -65,19 +65,19 @@ def _rhs(c, parent, var, k_poly, forcing, x, f, theta, out):  # pragma: no cover
         out[i] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _rk4_batch(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound):  # pragma: no cover
     b, kk, n = coefs.shape
     n_t = dt.shape[0] + 1
     out = np.full((b, n_t, n), np.nan)
     diverged = np.zeros(b, dtype=np.bool_)
-    theta = np.empty(kk)
-    k1 = np.empty(n)
-    k2 = np.empty(n)
-    k3 = np.empty(n)
-    k4 = np.empty(n)
-    xs = np.empty(n)
-    for j in range(b):
+    for j in prange(b):
+        theta = np.empty(kk)
+        k1 = np.empty(n)
+        k2 = np.empty(n)
+        k3 = np.empty(n)
+        k4 = np.empty(n)
+        xs = np.empty(n)
         c = coefs[j]
         x = x0[j].copy()
         out[j, 0] = x

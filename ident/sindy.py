@@ -128,7 +128,12 @@ def sweep(library: PolynomialForcingLibrary, x: np.ndarray, dxdt: np.ndarray, t:
     forcing = None if forcing is None else np.asarray(forcing, float)
     _check_data(x, dxdt, t, forcing, library)
     theta = library.transform(x, forcing)
-    xi0 = np.linalg.lstsq(theta, dxdt, rcond=None)[0]
+    # Threshold in normalised units: each column scaled to unit RMS, so a
+    # coefficient's size is its term's contribution (pysindy's normalize_columns).
+    scale = np.sqrt(np.mean(theta**2, axis=0))
+    scale[scale == 0] = 1.0
+    theta_n = theta / scale
+    xi0 = np.linalg.lstsq(theta_n, dxdt, rcond=None)[0]
     mags = np.unique(np.abs(xi0[xi0 != 0]))
     # Thresholds between consecutive magnitudes give every count from all to none.
     lambdas = np.concatenate([[0.0], 0.5 * (mags[:-1] + mags[1:]), [mags[-1] * 1.01 if mags.size else 1.0]])
@@ -136,7 +141,7 @@ def sweep(library: PolynomialForcingLibrary, x: np.ndarray, dxdt: np.ndarray, t:
         lambdas = np.quantile(lambdas, np.linspace(0, 1, max_candidates))
     cands: dict[bytes, tuple[float, np.ndarray]] = {}
     for lam in lambdas:
-        xi = stlsq(theta, dxdt, lam)
+        xi = stlsq(theta_n, dxdt, lam) / scale[:, None]
         key = (xi != 0).tobytes()
         cands.setdefault(key, (float(lam), xi))
     lams = np.array([v[0] for v in cands.values()])
@@ -201,7 +206,8 @@ def refine(library: PolynomialForcingLibrary, coefs: np.ndarray, x: np.ndarray, 
         if key not in cache:
             h = 1e-6 * np.maximum(np.abs(p), 1e-3)
             e = batch(np.vstack([p, p + np.diag(h), p - np.diag(h)]))
-            g = (e[1 : p.size + 1] - e[p.size + 1 :]) / (2 * h)
+            with np.errstate(invalid="ignore"):  # inf - inf where a perturbation diverged
+                g = (e[1 : p.size + 1] - e[p.size + 1 :]) / (2 * h)
             cache.clear()
             cache[key] = (float(e[0]) if np.isfinite(e[0]) else 1e10, np.where(np.isfinite(g), g, 0.0))
         return cache[key]
