@@ -132,14 +132,28 @@ def savgol(f: np.ndarray, dx: float, window: int = 31, order: int = 3) -> np.nda
 
 
 def spectral(f: np.ndarray, dx: float, cutoff_hz: float | None = None) -> np.ndarray:
-    """FFT derivative (i omega F) of the mirror-extended signal, low-passed at ``cutoff_hz``.
+    """FFT derivative (i omega F), optionally low-passed at ``cutoff_hz``.
 
-    The even extension makes the signal continuous at the period boundary, so
-    the derivative has no Gibbs ringing from the end jump.
+    A cubic matching the value and slope at both ends (slopes from a least-squares
+    quadratic over the first and last 2 % of samples) is removed first and its derivative added back:
+    what remains has zero value and slope at the ends, so its even (mirror)
+    extension is continuously differentiable and the series of its derivative
+    does not ring at the period boundary.
     """
     f = _check_signal(f, dx, 4)
     n = f.size
-    g = np.concatenate([f, f[-2:0:-1]])
+    length = (n - 1) * dx
+    s = np.linspace(0.0, 1.0, n)
+    k = int(min(max(n // 50, 5), n))
+    tt = np.arange(k) * dx
+    d0 = np.polyfit(tt, f[:k], 2)[1]
+    d1 = -np.polyfit(tt, f[::-1][:k], 2)[1]
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    trend = h00 * f[0] + h10 * length * d0 + h01 * f[-1] + h11 * length * d1
+    dtrend = ((6 * s**2 - 6 * s) * f[0] + (3 * s**2 - 4 * s + 1) * length * d0
+              + (-6 * s**2 + 6 * s) * f[-1] + (3 * s**2 - 2 * s) * length * d1) / length
+    r = f - trend
+    g = np.concatenate([r, r[-2:0:-1]])
     freq = np.fft.rfftfreq(g.size, dx)
     spec = np.fft.rfft(g) * (2j * np.pi * freq)
     if cutoff_hz is not None:
@@ -148,7 +162,7 @@ def spectral(f: np.ndarray, dx: float, cutoff_hz: float | None = None) -> np.nda
         spec[freq > cutoff_hz] = 0.0
     if g.size % 2 == 0:
         spec[-1] = 0.0  # Nyquist bin of a real signal has no defined derivative sign
-    return np.fft.irfft(spec, g.size)[:n]
+    return np.fft.irfft(spec, g.size)[:n] + dtrend
 
 
 def smooth(x: np.ndarray, window: int, order: int = 3) -> np.ndarray:

@@ -1,0 +1,92 @@
+"""``ident bench sweep``: this project's sparsification sweep against a plain pysindy loop.
+
+Both run the same job on the clean Duffing data: for each threshold, fit
+STLSQ, integrate the model with the measured forcing, score the integration
+error, keep the best. Ours integrates all candidates in one compiled batch;
+the baseline calls pysindy's ``SINDy.fit`` and ``SINDy.simulate`` per
+threshold. Prints both times, their ratio, and whether both chose the same
+active set. A benchmark, not a test: the ratio is the figure that holds on a
+noisy machine.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+
+TOLERANCE = 0.5  # the same selection rule as ident.sindy.sweep's default
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("bench", help="benchmarks (printed ratios, not tests)")
+    p.add_argument("what", choices=["sweep"], help="sweep: ours vs a pysindy fit+simulate loop")
+    p.add_argument("--max-baseline", type=int, default=0,
+                   help="run pysindy on at most this many thresholds and extrapolate (0 = all)")
+    p.set_defaults(func=run)
+
+
+def _pysindy_loop(x, xdot, t, f, lambdas, n_rows):
+    import warnings
+
+    import pysindy as ps
+
+    lib = ps.GeneralizedLibrary(
+        [ps.PolynomialLibrary(degree=3), ps.IdentityLibrary()], inputs_per_library=[[0, 1], [2]]
+    )
+    errs, sets = [], []
+    for lam in lambdas:
+        # pysindy normalises columns by their L2 norm, ours by RMS: same threshold times sqrt(N).
+        model = ps.SINDy(optimizer=ps.STLSQ(threshold=lam * np.sqrt(n_rows), alpha=0.0,
+                                            normalize_columns=True), feature_library=lib)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model.fit(x, t=t, x_dot=xdot, u=f[:, None], feature_names=["x1", "x2", "F"])
+            coef = model.coefficients()
+            try:
+                # pysindy drops the last sample when it interpolates u; score what it returns
+                sim = model.simulate(x[0], t, u=f[:, None])
+                e = np.mean(np.sqrt(np.mean((sim - x[: sim.shape[0]]) ** 2, axis=0)) / x.std(axis=0))
+                if sim.shape[0] < x.shape[0] - 1 or not np.isfinite(e):
+                    e = np.inf
+            except Exception:  # noqa: BLE001 - a failed candidate is scored, as in our sweep
+                e = np.inf
+        errs.append(e)
+        sets.append(coef != 0)
+    return np.array(errs), sets
+
+
+def run(args) -> int:
+    from ..duffing import duffing_data
+    from ..library import PolynomialForcingLibrary
+    from ..sindy import sweep
+
+    d = duffing_data()
+    lib = PolynomialForcingLibrary(2, 3)
+    sweep(lib, d.x, d.xdot, d.t, d.forcing)  # compile the kernel outside the timing
+    t0 = time.perf_counter()
+    ours = sweep(lib, d.x, d.xdot, d.t, d.forcing)
+    t_ours = time.perf_counter() - t0
+    lambdas = ours.thresholds
+    n_base = len(lambdas) if not args.max_baseline else min(args.max_baseline, len(lambdas))
+    pick = np.linspace(0, len(lambdas) - 1, n_base).round().astype(int)
+    t0 = time.perf_counter()
+    errs, sets = _pysindy_loop(d.x, d.xdot, d.t, d.forcing, lambdas[pick], d.x.shape[0])
+    t_base = (time.perf_counter() - t0) * len(lambdas) / n_base
+    ours_set = ours.coefficients[ours.chosen].T != 0
+    finite = np.isfinite(errs)
+    same = None
+    if n_base == len(lambdas) and finite.any():
+        best = np.min(errs[finite])
+        ok = np.flatnonzero(finite & (errs <= best * (1 + TOLERANCE)))
+        nnz = np.array([s.sum() for s in sets])
+        base_set = sets[ok[np.argmin(nnz[ok])]]
+        same = bool(np.array_equal(base_set, ours_set))
+    print(f"candidates: {len(lambdas)} thresholds, {d.x.shape[0]} samples, library of {lib.n_terms} terms")
+    print(f"this project : {t_ours:8.3f} s")
+    extra = "" if n_base == len(lambdas) else f" (extrapolated from {n_base} thresholds)"
+    print(f"pysindy loop : {t_base:8.3f} s{extra}")
+    print(f"ratio        : {t_base / t_ours:8.0f} x faster")
+    print(f"same active set chosen: {same if same is not None else 'not compared (partial baseline)'}")
+    return 0

@@ -1,0 +1,30 @@
+"""Shared fixtures: the paper's clean Duffing data, computed once per session."""
+
+import os
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("RERUN_ANALYTICS", "0")  # no usage analytics from tests
+
+
+@pytest.fixture(scope="session")
+def duffing():
+    from ident.duffing import duffing_data
+
+    return duffing_data()
+
+
+@pytest.fixture(scope="session")
+def lorenz():
+    """Lorenz-63 (sigma 10, rho 28, beta 8/3) on its attractor, dt = 0.002, tight tolerance."""
+    from scipy.integrate import solve_ivp
+
+    def rhs(t, u):
+        return [10 * (u[1] - u[0]), u[0] * (28 - u[2]) - u[1], u[0] * u[1] - 8 / 3 * u[2]]
+
+    t = np.arange(0, 30, 0.002)
+    sol = solve_ivp(rhs, (0, 30), [-8, 8, 27], t_eval=t, method="DOP853", rtol=1e-12, atol=1e-12)
+    x = sol.y.T
+    dx = np.array([rhs(0, u) for u in x])
+    return t, x, dx

@@ -1,0 +1,58 @@
+"""The ident command line: the report and JSON of `ident duffing`, and one-line errors."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+
+def run(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "ident", *args], capture_output=True, text=True, **kw)
+
+
+@pytest.fixture(scope="module")
+def quick_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("duffing")
+    proc = run("duffing", "--quick", "--no-progress", "--json", str(out / "d.json"), "--report",
+               str(out / "report"), timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    return out, proc
+
+
+def test_duffing_json_has_the_documented_fields(quick_report):
+    out, _ = quick_report
+    js = json.loads((out / "d.json").read_text())
+    assert js["clean"]["coefficients"]["x2'"]["x1^3"] == pytest.approx(-0.6, abs=1e-6)
+    assert set(js["noise_example"]["coefficients"]) == {"x1'", "x2'"}
+    assert js["noise_example"]["snr_db"] == pytest.approx(22.33, abs=0.5)
+    assert js["noise_example"]["error_percent"] < 5
+    assert len(js["noise_sweep"]) == 4
+    assert all(len(r["error_percent"]) == 3 and "eta" in r and "snr_db" in r for r in js["noise_sweep"])
+    assert js["embedding"]["dimension"] == 3 and js["embedding"]["coefficients"]
+
+
+def test_duffing_report_folder(quick_report):
+    out, _ = quick_report
+    rep = out / "report"
+    for name in ("README.md", "table1_clean.csv", "table2_noise.csv", "table3_embedding.csv",
+                 "fig4_noise_sweep.csv", "fig2_duffing.png", "fig3_pareto.png", "fig4_error_vs_snr.png",
+                 "fig5_embedding.png"):
+        assert (rep / name).stat().st_size > 0, name
+    assert (rep / "fig2_duffing.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "![Figure 4]" in (rep / "README.md").read_text()
+
+
+@pytest.mark.parametrize("args", [["duffing", "--bogus"], ["nosuchcommand"], ["duffing", "--seed", "x"]])
+def test_usage_errors_are_one_line_and_exit_2(args):
+    proc = run(*args)
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert "Traceback" not in proc.stderr
+
+
+def test_value_errors_are_one_line_and_exit_2(tmp_path):
+    (tmp_path / "afile").write_text("x")
+    proc = run("duffing", "--quick", "--no-progress", "--report", str(tmp_path / "afile"))
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
