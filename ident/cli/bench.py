@@ -89,4 +89,8 @@ def run(args) -> int:
     print(f"pysindy loop : {t_base:8.3f} s{extra}")
     print(f"ratio        : {t_base / t_ours:8.0f} x faster")
     print(f"same active set chosen: {same if same is not None else 'not compared (partial baseline)'}")
+    if same is not None:
+        print("threshold  ours(nnz, error)        pysindy(nnz, error)")
+        for lam, n1, e1, s2, e2 in zip(lambdas, ours.n_nonzero, ours.errors, sets, errs):
+            print(f"{lam:9.3g}  {n1:3d} {e1:10.3g}          {int(s2.sum()):3d} {e2:10.3g}")
     return 0
