@@ -1,12 +1,15 @@
 """``ident bench sweep``: this project's sparsification sweep against a plain pysindy loop.
 
-Both run the same job on the clean Duffing data: for each threshold, fit
+Both run the same job on the paper's Table 2 data (Duffing, noise eta = 0.08
+on X and Xdot, states denoised as ``ident duffing`` does; on clean data every
+threshold below 1e-15 gives an exact model and the choice says nothing): for
+each threshold, fit
 STLSQ, integrate the model with the measured forcing, score the integration
 error, keep the best. Ours integrates all candidates in one compiled batch;
 the baseline calls pysindy's ``SINDy.fit`` and ``SINDy.simulate`` per
 threshold. Prints both times, their ratio, and whether both chose the same
 active set. A benchmark, not a test: the ratio is the figure that holds on a
-noisy machine.
+noisy machine. Run it alone: the compiled kernel uses both cores.
 """
 
 from __future__ import annotations
@@ -58,21 +61,29 @@ def _pysindy_loop(x, xdot, t, f, lambdas, n_rows):
 
 
 def run(args) -> int:
-    from ..duffing import duffing_data
+    from ..derivatives import smooth
+    from ..duffing import denoise_window, duffing_data
     from ..library import PolynomialForcingLibrary
     from ..sindy import sweep
 
     d = duffing_data()
+    rng = np.random.default_rng([0, 8])
+    xn = d.x + 0.08 * rng.standard_normal(d.x.shape)
+    xd = d.xdot + 0.08 * rng.standard_normal(d.x.shape)
+    x = smooth(xn, denoise_window(xn[:, 0]))
     lib = PolynomialForcingLibrary(2, 3)
-    sweep(lib, d.x, d.xdot, d.t, d.forcing)  # compile the kernel outside the timing
-    t0 = time.perf_counter()
-    ours = sweep(lib, d.x, d.xdot, d.t, d.forcing)
-    t_ours = time.perf_counter() - t0
+    sweep(lib, x, xd, d.t, d.forcing)  # compile the kernel outside the timing
+    times = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        ours = sweep(lib, x, xd, d.t, d.forcing)
+        times.append(time.perf_counter() - t0)
+    t_ours = float(np.median(times))
     lambdas = ours.thresholds
     n_base = len(lambdas) if not args.max_baseline else min(args.max_baseline, len(lambdas))
     pick = np.linspace(0, len(lambdas) - 1, n_base).round().astype(int)
     t0 = time.perf_counter()
-    errs, sets = _pysindy_loop(d.x, d.xdot, d.t, d.forcing, lambdas[pick], d.x.shape[0])
+    errs, sets = _pysindy_loop(x, xd, d.t, d.forcing, lambdas[pick], x.shape[0])
     t_base = (time.perf_counter() - t0) * len(lambdas) / n_base
     ours_set = ours.coefficients[ours.chosen].T != 0
     finite = np.isfinite(errs)
@@ -83,8 +94,8 @@ def run(args) -> int:
         nnz = np.array([s.sum() for s in sets])
         base_set = sets[ok[np.argmin(nnz[ok])]]
         same = bool(np.array_equal(base_set, ours_set))
-    print(f"candidates: {len(lambdas)} thresholds, {d.x.shape[0]} samples, library of {lib.n_terms} terms")
-    print(f"this project : {t_ours:8.3f} s")
+    print(f"candidates: {len(lambdas)} thresholds, {x.shape[0]} samples, library of {lib.n_terms} terms")
+    print(f"this project : {t_ours:8.3f} s (median of 5)")
     extra = "" if n_base == len(lambdas) else f" (extrapolated from {n_base} thresholds)"
     print(f"pysindy loop : {t_base:8.3f} s{extra}")
     print(f"ratio        : {t_base / t_ours:8.0f} x faster")
