@@ -31,10 +31,13 @@ with numba.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numba import njit
+
+from .excitation import Excitation, base_acceleration, kick_acceleration
+from .sensors import Sensor
 
 TWO_PI = 2.0 * np.pi
 
@@ -43,16 +46,17 @@ TWO_PI = 2.0 * np.pi
 class Beam:
     """One cantilever's first mode, with its stoppers and optional extra effects (SI units)."""
 
-    mass_kg: float = 0.040  # 32.75 g tip mass + effective mass of the 1.5 mm aluminium sheet
-    natural_frequency_hz: float = 11.2  # clamped, uncoupled
-    damping_ratio: float = 0.03
-    gap_pos_m: float = 2.7e-3  # stopper on the + side; inf = no stopper
-    gap_neg_m: float = 2.7e-3  # stopper on the - side (distance, positive); inf = no stopper
-    stopper_stiffness_n_per_m: float = 1.0e5
-    stopper_damping_n_s_per_m: float = 2.0
+    # 32.75 g tip mass + effective mass of the 1.5 mm aluminium sheet
+    mass_kg: float = field(default=0.040, metadata={"gt": 0.0})
+    natural_frequency_hz: float = field(default=11.2, metadata={"gt": 0.0, "max": 1000.0})  # uncoupled
+    damping_ratio: float = field(default=0.03, metadata={"min": 0.0, "max": 1.0})
+    gap_pos_m: float = field(default=2.7e-3, metadata={"gt": 0.0})  # + side stopper; inf = none
+    gap_neg_m: float = field(default=2.7e-3, metadata={"gt": 0.0})  # - side (a distance); inf = none
+    stopper_stiffness_n_per_m: float = field(default=1.0e5, metadata={"min": 0.0})
+    stopper_damping_n_s_per_m: float = field(default=2.0, metadata={"min": 0.0})
     cubic_stiffness_n_per_m3: float = 0.0  # positive hardens
-    coulomb_friction_n: float = 0.0
-    quadratic_damping_n_s2_per_m2: float = 0.0
+    coulomb_friction_n: float = field(default=0.0, metadata={"min": 0.0})
+    quadratic_damping_n_s2_per_m2: float = field(default=0.0, metadata={"min": 0.0})
 
     @property
     def stiffness_n_per_m(self) -> float:
@@ -67,7 +71,7 @@ class Beam:
 class RigParams:
     beam1: Beam = field(default_factory=Beam)
     beam2: Beam = field(default_factory=Beam)
-    coupling_stiffness_n_per_m: float = 1.0
+    coupling_stiffness_n_per_m: float = field(default=1.0, metadata={"min": 0.0})
 
     def vector(self) -> np.ndarray:
         """Per-mass parameter vector of the compiled kernel (layout in ``_PARAM_NAMES``)."""
@@ -231,5 +235,59 @@ def integrate(params: RigParams, state: np.ndarray, base_accel: np.ndarray, dt: 
                           out[:, :, 1].copy(), contact)
 
 
-def beam_fields() -> list[str]:
-    return [f.name for f in fields(Beam)]
+@dataclass(frozen=True)
+class Sensors:
+    base: Sensor = field(default_factory=Sensor)
+    tip1: Sensor = field(default_factory=Sensor)
+    tip2: Sensor = field(default_factory=Sensor)
+
+    def __iter__(self):
+        return iter((self.base, self.tip1, self.tip2))
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """Everything that defines the simulated rig: mechanics, shaker programme, sensors."""
+
+    rig: RigParams = field(default_factory=RigParams)
+    excitation: Excitation = field(default_factory=Excitation)
+    sensors: Sensors = field(default_factory=Sensors)
+    substeps: int = field(default=8, metadata={"min": 1, "max": 64})
+    seed: int = 0
+
+
+class RigSimulator:
+    """The rig as a stream: ``advance(n)`` returns the next n samples at ``rate_hz``.
+
+    Holds the mechanical state and the time, so consecutive calls continue the
+    same trajectory whatever their sizes (the excitation is a function of time).
+    """
+
+    def __init__(self, config: RigConfig, rate_hz: float, state: np.ndarray | None = None):
+        if rate_hz <= 0:
+            raise ValueError(f"rate_hz must be positive, got {rate_hz}")
+        self.config = config
+        self.rate_hz = float(rate_hz)
+        self.state = np.zeros(4) if state is None else np.asarray(state, float).copy()
+        self.n_done = 0
+
+    def advance(self, n: int) -> tuple[np.ndarray, RigOutput]:
+        """Times (n,) [s] and the rig response at them."""
+        m = self.config.substeps
+        k0 = self.n_done * m
+        tt = (k0 + np.arange(n * m + 1)) / (self.rate_hz * m)
+        exc = self.config.excitation
+        ab = base_acceleration(exc, tt)
+        kick = kick_acceleration(exc, tt) if exc.kicks else None
+        self.state, out = integrate(self.config.rig, self.state, ab, 1.0 / self.rate_hz, m, kick)
+        self.n_done += n
+        return tt[m::m], out
+
+
+def simulate_rig(config: RigConfig, duration_s: float, rate_hz: float = 2000.0,
+                 state: np.ndarray | None = None) -> tuple[np.ndarray, RigOutput]:
+    """The rig's true response over ``duration_s`` (no sensors): times and outputs."""
+    n = int(round(duration_s * rate_hz))
+    if n < 1:
+        raise ValueError(f"duration {duration_s} s at {rate_hz} Hz gives no sample")
+    return RigSimulator(config, rate_hz, state).advance(n)
