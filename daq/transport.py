@@ -101,8 +101,9 @@ class PtyServer:
                 if due > 0:
                     self._fifo += self.device.frames(due)
                 self._drain()
-                deadline = t0 + (self.device.seq + 1) / rate
-                time.sleep(max(0.0, min(TICK_S, deadline - time.monotonic())))
+                # Next tick on the absolute grid t0 + k * TICK_S: no accumulated drift.
+                elapsed = time.monotonic() - t0
+                time.sleep(max(0.0, TICK_S - (elapsed % TICK_S)))
             end = time.monotonic() + 1.0  # let the reader take what is still in the FIFO
             while self._fifo and time.monotonic() < end and not self._stop.is_set():
                 self._drain()

@@ -1,0 +1,130 @@
+"""``daq``: record the rig (or its simulation) to MCAP; serve the simulated rig on a pty."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from ident.cli import OneLineParser, run_guarded
+
+from .config import load_config
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = OneLineParser(prog="daq", description="shaker-rig acquisition: serial frames to MCAP")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
+    r = sub.add_parser("record", help="record the rig (default: the simulated rig) to an MCAP file")
+    src = r.add_mutually_exclusive_group()
+    src.add_argument("--port", help="serial device path or pyserial URL (rig://, loop://, ...)")
+    src.add_argument("--sim", action="store_true", help="record the simulated rig over a pty (the default)")
+    r.add_argument("--config", type=Path, help="rig and daq config (YAML); defaults if omitted")
+    r.add_argument("-o", "--output", type=Path, help="MCAP file to write (default rig-YYYYmmdd-HHMMSS.mcap)")
+    r.add_argument("--duration", type=float, help="stop after this many seconds of samples")
+    r.add_argument("--quiet", action="store_true", help="no live status line")
+    r.set_defaults(func=record)
+    s = sub.add_parser("sim", help="serve the simulated rig on a pty and print its path")
+    s.add_argument("--config", type=Path, help="rig and daq config (YAML)")
+    s.add_argument("--link", type=Path, help="also make this symlink point at the pty (kept across reconnects)")
+    s.add_argument("--duration", type=float, help="stop after this many seconds")
+    s.add_argument("--seed", type=int, help="noise seed (default from the config)")
+    s.set_defaults(func=sim)
+    return p
+
+
+def _check_duration(d: float | None) -> None:
+    if d is not None and not (d > 0):
+        raise ValueError(f"--duration must be a positive number of seconds, got {d}")
+
+
+def sim(args) -> int:
+    from .transport import PtyServer
+
+    _check_duration(args.duration)
+    cfg = load_config(args.config)
+    server = PtyServer(cfg, args.link, args.seed)
+    print(f"simulated rig on {server.path}" + (f" (link {args.link})" if args.link else ""), flush=True)
+    _on_signals(server.stop)
+    server.serve(args.duration)
+    return 0
+
+
+def _on_signals(stop) -> None:
+    def handler(signum, frame):
+        stop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, handler)
+
+
+def record(args) -> int:
+    from .driver import Acquisition
+    from .recorder import McapRecorder
+    from .transport import PtyServer
+
+    _check_duration(args.duration)
+    cfg = load_config(args.config)
+    out = args.output or Path(time.strftime("rig-%Y%m%d-%H%M%S.mcap"))
+    if out.exists() and out.is_dir():
+        raise ValueError(f"-o {out} is a folder; give a file name ending in .mcap")
+    server = thread = None
+    tmp = None
+    go = threading.Event()
+    if args.port:
+        port = args.port
+    else:
+        tmp = tempfile.TemporaryDirectory(prefix="daq-sim-")
+        server = PtyServer(cfg, Path(tmp.name) / "rig")
+        port = str(server.link)
+        extra = None if args.duration is None else args.duration + 1.0
+        thread = threading.Thread(target=server.serve, args=(extra, go), daemon=True)
+        thread.start()
+    rec = McapRecorder(out, cfg, port=port)
+    acq = Acquisition(port, cfg)
+    last_status = [time.monotonic()]
+
+    def on_block(b):
+        rec.write_block(b)
+        now = time.monotonic()
+        if now - last_status[0] >= 1.0:
+            last_status[0] = now
+            st = acq.status()
+            rec.write_status(st)
+            if not args.quiet:
+                print(f"\r{st['samples']:9d} samples  {st['dropped_frames']} dropped  {st['crc_errors']} crc  "
+                      f"{st['reconnects']} reconnects", end="", file=sys.stderr, flush=True)
+
+    acq.on_block = on_block
+    acq.on_raw = rec.write_raw
+    acq.on_event = rec.write_event
+    _on_signals(acq.stop)
+    try:
+        acq.run(args.duration, opened=go)
+    finally:
+        rec.write_status(acq.status())
+        rec.close()
+        if server is not None:
+            server.stop()
+            thread.join(timeout=5)
+        if tmp is not None:
+            tmp.cleanup()
+    st = acq.status()
+    size = out.stat().st_size
+    if not args.quiet:
+        print(file=sys.stderr)
+    per = size / st["samples"] if st["samples"] else float("nan")
+    print(f"{out}: {st['samples']} samples, {st['dropped_frames']} dropped, {st['crc_errors']} CRC errors, "
+          f"{st['reconnects']} reconnects, {size} bytes ({per:.1f} bytes per 3-channel sample)")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return run_guarded(f"daq {args.command}", args.func, args)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
