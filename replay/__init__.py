@@ -1,0 +1,4 @@
+"""replay: reading recordings, recovering broken ones, and (with its issue) playback.
+
+May import ident and daq.
+"""

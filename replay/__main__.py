@@ -1,0 +1,7 @@
+"""``python -m replay`` runs the ``replay`` command line."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())
