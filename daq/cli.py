@@ -33,6 +33,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--duration", type=float, help="stop after this many seconds")
     s.add_argument("--seed", type=int, help="noise seed (default from the config)")
     s.set_defaults(func=sim)
+    from . import bench
+
+    bench.add_parser(sub)
     return p
 
 

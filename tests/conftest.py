@@ -5,7 +5,16 @@ import os
 import numpy as np
 import pytest
 
-os.environ.setdefault("RERUN_ANALYTICS", "0")  # no usage analytics from tests
+
+def pytest_configure(config):
+    """No usage analytics from rerun while tests run (the machines have no network for it)."""
+    import shutil
+    import subprocess
+    import sys
+
+    exe = shutil.which("rerun") or os.path.join(os.path.dirname(sys.executable), "rerun")
+    if os.path.exists(exe):
+        subprocess.run([exe, "analytics", "disable"], capture_output=True, timeout=60)
 
 
 @pytest.fixture(scope="session")
