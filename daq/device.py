@@ -23,6 +23,9 @@ class SimulatedDevice:
     def __init__(self, config: Config, seed: int | None = None):
         self.config = config
         self.rate_hz = config.daq.rate_hz
+        # Compile the rig kernel now (a throwaway simulator), not on the first real-time sample:
+        # on a fresh install that takes seconds, which would show as a burst of overdue frames.
+        RigSimulator(config.rig, self.rate_hz).advance(2)
         self.sim = RigSimulator(config.rig, self.rate_hz)
         self.rng = np.random.default_rng(config.rig.seed if seed is None else seed)
         self.seq = 0  # next sequence number (frames generated, including device-side drops)
