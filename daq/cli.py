@@ -26,6 +26,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", type=Path, help="MCAP file to write (default rig-YYYYmmdd-HHMMSS.mcap)")
     r.add_argument("--duration", type=float, help="stop after this many seconds of samples")
     r.add_argument("--quiet", action="store_true", help="no live status line")
+    r.add_argument("--viewer", choices=("spawn", "web", "save", "none"), default="none",
+                   help="rerun viewer: spawn, web, save (an .rrd next to the recording) or none (default)")
+    r.add_argument("--events", type=Path, help="also write events as JSON lines here")
+    r.add_argument("--no-identify", action="store_true", help="record only: no filters, regimes, SINDy")
     r.set_defaults(func=record)
     s = sub.add_parser("sim", help="serve the simulated rig on a pty and print its path")
     s.add_argument("--config", type=Path, help="rig and daq config (YAML)")
@@ -88,9 +92,15 @@ def record(args) -> int:
     rec = McapRecorder(out, cfg, port=port)
     acq = Acquisition(port, cfg)
     last_status = [time.monotonic()]
+    live = None if args.no_identify else LiveProcessing(cfg.daq.rate_hz, args.viewer, out.with_suffix(".rrd"),
+                                                         args.events)
 
     def on_block(b):
         rec.write_block(b)
+        if live is not None:
+            live.submit(b)
+            for e in live.drain_events():
+                rec.write_event(e)
         now = time.monotonic()
         if now - last_status[0] >= 1.0:
             last_status[0] = now
@@ -100,13 +110,22 @@ def record(args) -> int:
                 print(f"\r{st['samples']:9d} samples  {st['dropped_frames']} dropped  {st['crc_errors']} crc  "
                       f"{st['reconnects']} reconnects", end="", file=sys.stderr, flush=True)
 
+    def on_event(e):
+        rec.write_event(e)
+        if live is not None:
+            live.log_event(e)
+
     acq.on_block = on_block
     acq.on_raw = rec.write_raw
-    acq.on_event = rec.write_event
+    acq.on_event = on_event
     _on_signals(acq.stop)
     try:
         acq.run(args.duration, opened=go)
     finally:
+        if live is not None:
+            live.close()
+            for e in live.drain_events():
+                rec.write_event(e)
         rec.write_status(acq.status())
         rec.close()
         if server is not None:
@@ -121,7 +140,98 @@ def record(args) -> int:
     per = size / st["samples"] if st["samples"] else float("nan")
     print(f"{out}: {st['samples']} samples, {st['dropped_frames']} dropped, {st['crc_errors']} CRC errors, "
           f"{st['reconnects']} reconnects, {size} bytes ({per:.1f} bytes per 3-channel sample)")
+    if live is not None:
+        print(live.summary())
     return 0
+
+
+class LiveProcessing:
+    """The pipeline beside acquisition, in a worker thread, so a slow model fit never stalls the port.
+
+    Blocks go in through a queue; pipeline events come back through another and
+    are written by the acquisition thread (the recorder is not shared across
+    threads). Latency: from a block's arrival to the model update that includes it.
+    """
+
+    def __init__(self, fs_hz: float, viewer_mode: str, rrd_path: Path, events_path: Path | None):
+        import queue
+
+        from ident.pipeline import Pipeline, PipelineConfig
+
+        from .eventlog import JsonlEvents
+        from .viewer import RerunViewer
+
+        self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz))
+        self.viewer = RerunViewer(viewer_mode, rrd_path=rrd_path, fs_hz=fs_hz)
+        self.jsonl = JsonlEvents(events_path) if events_path else None
+        self.inq: queue.Queue = queue.Queue()
+        self.outq: queue.Queue = queue.Queue()
+        self.latencies: list[float] = []
+        self.regimes: list[str] = []
+        self.busy_s = 0.0
+        self.error: str | None = None
+        self.thread = threading.Thread(target=self._work, daemon=True)
+        self.thread.start()
+
+    def submit(self, block) -> None:
+        self.inq.put((time.monotonic(), block.values))
+
+    def _work(self) -> None:
+        from .driver import Event
+
+        while True:
+            item = self.inq.get()
+            if item is None:
+                return
+            arrived, values = item
+            t0 = time.monotonic()
+            try:
+                out = self.pipe.step(values)
+                self.viewer.log_step(out)
+            except Exception as exc:  # noqa: BLE001 - processing must never stop the recording
+                if self.error is None:
+                    self.error = f"{type(exc).__name__}: {exc}"
+                    self.outq.put(Event(0.0, "error", f"live processing stopped: {self.error}", "error"))
+                continue
+            done = time.monotonic()
+            self.busy_s += done - t0
+            if out.fits:
+                self.latencies.append(done - arrived)
+            for e in out.events:
+                if self.jsonl:
+                    self.jsonl.write(e)
+                if e["kind"] == "regime":
+                    self.regimes.append(e["regime"])
+                msg = (f"regime {e['regime']} (was {e['previous']})" if e["kind"] == "regime"
+                       else f"beam {e.get('beam')} model changed: " + "; ".join(e.get("equations", [])))
+                data = {k: v for k, v in e.items() if k not in ("t", "kind")}
+                self.outq.put(Event(e["t"], e["kind"], msg, "info", data))
+
+    def drain_events(self) -> list:
+        out = []
+        while not self.outq.empty():
+            out.append(self.outq.get_nowait())
+        return out
+
+    def log_event(self, e) -> None:
+        if self.jsonl:
+            self.jsonl.write({"t": e.t, "kind": e.kind, "message": e.message, **e.data})
+
+    def close(self) -> None:
+        self.inq.put(None)
+        self.thread.join(timeout=60)
+        self.viewer.close()
+        if self.jsonl:
+            self.jsonl.close()
+
+    def summary(self) -> str:
+        import numpy as np
+
+        lat = np.array(self.latencies)
+        p = (f"latency sample -> model update p50 {1e3 * np.percentile(lat, 50):.0f} ms, "
+             f"p95 {1e3 * np.percentile(lat, 95):.0f} ms" if lat.size else "no model update")
+        return (f"live: {len(self.latencies)} model updates, {len(self.regimes)} regime changes, {p}"
+                + (f"; ERROR {self.error}" if self.error else ""))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -95,6 +95,8 @@ class McapRecorder:
         self._anchor_ns: int | None = None  # host epoch ns at device time 0
         self._seq = {k: 0 for k in ids}
         self.samples = 0
+        self._first_seq: int | None = None
+        self._last_seq: int | None = None
         self.closed = False
 
     def _add(self, key: str, log_ns: int, pub_ns: int, data: bytes) -> None:
@@ -117,6 +119,9 @@ class McapRecorder:
             msg = (f'{{"seq":{int(b.seq[i])},"t_device":{b.t_device_s[i]:.6f},"base":{v[i, 0]:.6g},'
                    f'"tip1":{v[i, 1]:.6g},"tip2":{v[i, 2]:.6g},"clipped":{"true" if b.clipped[i] else "false"}}}')
             self._add("accel", int(log_ns[i]), b.host_ns, msg.encode())
+        if self._first_seq is None:
+            self._first_seq = int(b.seq[0])
+        self._last_seq = int(b.seq[-1])
         self.samples += len(b)
         self._maybe_flush()
 
@@ -143,5 +148,9 @@ class McapRecorder:
         if self.closed:
             return
         self.closed = True
+        if self._first_seq is not None:
+            # the recorded range, so that re-decoding /rig/raw gives exactly the samples of /rig/accel
+            self._w.add_metadata("samples", {"first_seq": str(self._first_seq), "last_seq": str(self._last_seq),
+                                             "count": str(self.samples)})
         self._w.finish()
         self._fh.close()

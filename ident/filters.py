@@ -12,6 +12,7 @@ above 50 Hz.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.signal import butter, sosfilt, sosfilt_zi, sosfiltfilt
@@ -19,13 +20,25 @@ from scipy.signal import butter, sosfilt, sosfilt_zi, sosfiltfilt
 DEFAULT_CUTOFF_HZ = 50.0
 
 
+@lru_cache(maxsize=32)
+def _butter_sos(order: int, cutoff_hz: float, btype: str, fs_hz: float) -> np.ndarray:
+    return butter(order, cutoff_hz, btype=btype, fs=fs_hz, output="sos")
+
+
 def design_lowpass(fs_hz: float, cutoff_hz: float = DEFAULT_CUTOFF_HZ, order: int = 4) -> np.ndarray:
-    """Butterworth low-pass as second-order sections."""
+    """Butterworth low-pass as second-order sections (designs are cached)."""
     if not 0 < cutoff_hz < fs_hz / 2:
         raise ValueError(f"cutoff {cutoff_hz} Hz must lie between 0 and the Nyquist frequency {fs_hz / 2} Hz")
     if order < 1:
         raise ValueError(f"filter order must be >= 1, got {order}")
-    return butter(order, cutoff_hz, btype="low", fs=fs_hz, output="sos")
+    return _butter_sos(int(order), float(cutoff_hz), "low", float(fs_hz)).copy()
+
+
+def design_highpass(fs_hz: float, cutoff_hz: float, order: int = 2) -> np.ndarray:
+    """Butterworth high-pass as second-order sections (designs are cached)."""
+    if not 0 < cutoff_hz < fs_hz / 2:
+        raise ValueError(f"cutoff {cutoff_hz} Hz must lie between 0 and the Nyquist frequency {fs_hz / 2} Hz")
+    return _butter_sos(int(order), float(cutoff_hz), "high", float(fs_hz)).copy()
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
-from scipy.signal import butter, sosfiltfilt
+from scipy.signal import sosfiltfilt
+
+from .filters import design_highpass
 
 
 def edge_samples(fs_hz: float, f_lo_hz: float) -> int:
@@ -32,7 +34,7 @@ def integrate_band(a: np.ndarray, fs_hz: float, f_lo_hz: float = 2.0) -> tuple[n
     if a.shape[0] < 3 * edge_samples(fs_hz, f_lo_hz):
         raise ValueError(f"{a.shape[0]} samples are too few to integrate above {f_lo_hz} Hz; need at least "
                          f"{3 * edge_samples(fs_hz, f_lo_hz)} (three periods of the high-pass)")
-    sos = butter(2, f_lo_hz, "high", fs=fs_hz, output="sos")
+    sos = design_highpass(fs_hz, f_lo_hz, 2)
     dt = 1.0 / fs_hz
 
     def integ(x):

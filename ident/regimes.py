@@ -20,7 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import butter, sosfilt
+from scipy.signal import sosfilt
+
+from .filters import design_highpass, design_lowpass
 
 LABELS = ("linear", "localized-1", "localized-2", "impacting-both")
 
@@ -66,8 +68,8 @@ class RegimeMonitor:
         self.cfg = cfg
         self.hop = max(1, int(round(cfg.hop_s * cfg.fs_hz)))
         self.n_hops = max(1, int(round(cfg.window_s / cfg.hop_s)))
-        self._hp = butter(4, cfg.hf_cutoff_hz, "high", fs=cfg.fs_hz, output="sos")
-        self._lp = butter(4, 50.0, "low", fs=cfg.fs_hz, output="sos")
+        self._hp = design_highpass(cfg.fs_hz, cfg.hf_cutoff_hz, 4)
+        self._lp = design_lowpass(cfg.fs_hz, 50.0, 4)
         self._zhp = np.zeros((self._hp.shape[0], 2, 2))
         self._zlp = np.zeros((self._lp.shape[0], 2, 3))
         self._pend_hf = np.zeros((0, 2))

@@ -94,7 +94,7 @@ N_PER_BEAM = 10
 FRICTION_V_EPS = 1e-4
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _accel(p, z, v, ab, kick, out_a, out_contact):  # pragma: no cover - compiled
     for i in range(2):
         o = i * N_PER_BEAM
@@ -126,7 +126,7 @@ def _accel(p, z, v, ab, kick, out_a, out_contact):  # pragma: no cover - compile
         out_contact[i] = contact
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _integrate(p, state, ab, kick, dt, m):  # pragma: no cover - compiled
     """RK4 with ``m`` sub-steps per output sample; ab (n*m + 1,), kick (n*m + 1, 2).
 

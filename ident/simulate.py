@@ -48,7 +48,7 @@ def _chain(library: PolynomialForcingLibrary) -> tuple[np.ndarray, np.ndarray]:
     return parent, var
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rhs(c, parent, var, k_poly, forcing, x, f, theta, out):  # pragma: no cover - compiled
     theta[0] = 1.0
     for k in range(1, k_poly):
@@ -65,49 +65,92 @@ def _rhs(c, parent, var, k_poly, forcing, x, f, theta, out):  # pragma: no cover
         out[i] = acc
 
 
-@njit(cache=True, parallel=True)
-def _rk4_batch(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound):  # pragma: no cover
-    b, kk, n = coefs.shape
-    n_t = dt.shape[0] + 1
-    out = np.full((b, n_t, n), np.nan)
+@njit(cache=True, nogil=True)
+def _rk4_model(c, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound, out):  # pragma: no cover
+    """Integrate one model into ``out`` (n_t, n), pre-filled with NaN; True if it diverged."""
+    n = x0.shape[0]
+    kk = c.shape[0]
+    theta = np.empty(kk)
+    k1 = np.empty(n)
+    k2 = np.empty(n)
+    k3 = np.empty(n)
+    k4 = np.empty(n)
+    xs = np.empty(n)
+    x = x0.copy()
+    out[0] = x
+    for i in range(dt.shape[0]):
+        h = dt[i] / m
+        for s in range(m):
+            f0 = f_stage[i, 2 * s]
+            fm = f_stage[i, 2 * s + 1]
+            f1 = f_stage[i, 2 * s + 2]
+            _rhs(c, parent, var, k_poly, forcing, x, f0, theta, k1)
+            for q in range(n):
+                xs[q] = x[q] + 0.5 * h * k1[q]
+            _rhs(c, parent, var, k_poly, forcing, xs, fm, theta, k2)
+            for q in range(n):
+                xs[q] = x[q] + 0.5 * h * k2[q]
+            _rhs(c, parent, var, k_poly, forcing, xs, fm, theta, k3)
+            for q in range(n):
+                xs[q] = x[q] + h * k3[q]
+            _rhs(c, parent, var, k_poly, forcing, xs, f1, theta, k4)
+            for q in range(n):
+                x[q] = x[q] + (h / 6.0) * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
+        for q in range(n):
+            if not (abs(x[q]) <= bound):  # also catches NaN
+                return True
+        out[i + 1] = x
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _rk4_serial(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound):  # pragma: no cover
+    b, _, n = coefs.shape
+    out = np.full((b, dt.shape[0] + 1, n), np.nan)
+    diverged = np.zeros(b, dtype=np.bool_)
+    for j in range(b):
+        diverged[j] = _rk4_model(coefs[j], parent, var, k_poly, forcing, x0[j], dt, f_stage, m, bound, out[j])
+    return out, diverged
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def _rk4_parallel(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound):  # pragma: no cover
+    b, _, n = coefs.shape
+    out = np.full((b, dt.shape[0] + 1, n), np.nan)
     diverged = np.zeros(b, dtype=np.bool_)
     for j in prange(b):
-        theta = np.empty(kk)
-        k1 = np.empty(n)
-        k2 = np.empty(n)
-        k3 = np.empty(n)
-        k4 = np.empty(n)
-        xs = np.empty(n)
-        c = coefs[j]
-        x = x0[j].copy()
-        out[j, 0] = x
-        for i in range(n_t - 1):
-            h = dt[i] / m
-            for s in range(m):
-                f0 = f_stage[i, 2 * s]
-                fm = f_stage[i, 2 * s + 1]
-                f1 = f_stage[i, 2 * s + 2]
-                _rhs(c, parent, var, k_poly, forcing, x, f0, theta, k1)
-                for q in range(n):
-                    xs[q] = x[q] + 0.5 * h * k1[q]
-                _rhs(c, parent, var, k_poly, forcing, xs, fm, theta, k2)
-                for q in range(n):
-                    xs[q] = x[q] + 0.5 * h * k2[q]
-                _rhs(c, parent, var, k_poly, forcing, xs, fm, theta, k3)
-                for q in range(n):
-                    xs[q] = x[q] + h * k3[q]
-                _rhs(c, parent, var, k_poly, forcing, xs, f1, theta, k4)
-                for q in range(n):
-                    x[q] = x[q] + (h / 6.0) * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
-            ok = True
-            for q in range(n):
-                if not (abs(x[q]) <= bound):  # also catches NaN
-                    ok = False
-            if not ok:
-                diverged[j] = True
-                break
-            out[j, i + 1] = x
+        diverged[j] = _rk4_model(coefs[j], parent, var, k_poly, forcing, x0[j], dt, f_stage, m, bound, out[j])
     return out, diverged
+
+
+# Below this many model-steps a batch runs on one thread: the pool's overhead would dominate.
+PARALLEL_MIN_WORK = 200_000
+
+
+_STAGE_CACHE: dict[tuple, np.ndarray] = {}
+
+
+def _forcing_stages(t: np.ndarray, forcing: np.ndarray, m: int) -> np.ndarray:
+    """Forcing at every RK4 stage time t_i + j h/2, j = 0 .. 2m, from a cubic spline of the samples.
+
+    Cached by content (a sweep, an SQP run and a rolling fit integrate many
+    models against the same forcing); the cache holds the last few.
+    """
+    key = (hash(t.tobytes()), hash(forcing.tobytes()), t.size, m)
+    hit = _STAGE_CACHE.get(key)
+    if hit is not None:
+        return hit
+    if not np.all(np.isfinite(forcing)):
+        raise ValueError("forcing contains NaN or inf")
+    dt = np.diff(t)
+    frac = np.arange(2 * m) / (2 * m)
+    t_stage = (t[:-1, None] + dt[:, None] * frac[None]).ravel()
+    f_stage = CubicSpline(t, forcing)(t_stage).reshape(t.size - 1, 2 * m)
+    f_stage = np.ascontiguousarray(np.concatenate([f_stage, forcing[1:, None]], axis=1))
+    if len(_STAGE_CACHE) >= 8:
+        _STAGE_CACHE.pop(next(iter(_STAGE_CACHE)))
+    _STAGE_CACHE[key] = f_stage
+    return f_stage
 
 
 def simulate(
@@ -148,7 +191,6 @@ def simulate(
     if m < 1:
         raise ValueError("substeps must be >= 1")
 
-    # Forcing at every stage time: t_i + j*h/2, j = 0 .. 2m.
     n_t = t.size
     if library.forcing:
         if forcing is None:
@@ -156,19 +198,15 @@ def simulate(
         forcing = np.asarray(forcing, dtype=float)
         if forcing.shape != t.shape:
             raise ValueError(f"forcing has {forcing.shape[0]} samples, t has {t.size}")
-        if not np.all(np.isfinite(forcing)):
-            raise ValueError("forcing contains NaN or inf")
-        frac = np.arange(2 * m) / (2 * m)
-        t_stage = (t[:-1, None] + dt[:, None] * frac[None]).ravel()
-        f_stage = CubicSpline(t, forcing)(t_stage).reshape(n_t - 1, 2 * m)
-        f_stage = np.concatenate([f_stage, np.r_[forcing[1:]][:, None]], axis=1)
+        f_stage = _forcing_stages(t, forcing, m)
     else:
         f_stage = np.zeros((n_t - 1, 2 * m + 1))
 
     parent, var = _chain(library)
-    res, diverged = _rk4_batch(np.ascontiguousarray(coefs), parent, var, library.powers.shape[0],
-                               library.forcing, np.ascontiguousarray(x0), dt,
-                               np.ascontiguousarray(f_stage), m, float(bound))
+    kernel = _rk4_parallel if b * (n_t - 1) * m >= PARALLEL_MIN_WORK else _rk4_serial
+    res, diverged = kernel(np.ascontiguousarray(coefs), parent, var, library.powers.shape[0],
+                           library.forcing, np.ascontiguousarray(x0), dt,
+                           np.ascontiguousarray(f_stage), m, float(bound))
     if single:
         return Simulation(res[0], diverged[:1])
     return Simulation(res, diverged)

@@ -172,14 +172,17 @@ def _choose(err: np.ndarray, nnz: np.ndarray, tolerance: float) -> int:
 
 def refine(library: PolynomialForcingLibrary, coefs: np.ndarray, x: np.ndarray, t: np.ndarray,
            forcing: np.ndarray | None = None, *, rel_bound: float = 0.5, maxiter: int = 100,
-           bound_factor: float = 20.0, fit_initial: bool = True) -> Refinement:
+           bound_factor: float = 20.0, fit_initial: bool = True, gradient: str = "central") -> Refinement:
     """SQP (SLSQP) on the non-zero coefficients within +-rel_bound of their values.
 
     Minimises the squared integration NRMSE; reports the error before and after.
     With ``fit_initial`` the initial state is optimised too (within half a
     standard deviation of the first sample): a noisy first sample otherwise
-    biases the whole trajectory fit.
+    biases the whole trajectory fit. ``gradient``: "central" differences
+    (2p + 1 integrations per gradient) or "forward" (p + 1, for live use).
     """
+    if gradient not in ("central", "forward"):
+        raise ValueError(f"unknown gradient scheme {gradient!r}; choose central or forward")
     x = np.asarray(x, float)
     t = np.asarray(t, float)
     coefs = np.asarray(coefs, float)
@@ -208,9 +211,14 @@ def refine(library: PolynomialForcingLibrary, coefs: np.ndarray, x: np.ndarray, 
         key = p.tobytes()
         if key not in cache:
             h = 1e-6 * np.maximum(np.abs(p), 1e-3)
-            e = batch(np.vstack([p, p + np.diag(h), p - np.diag(h)]))
-            with np.errstate(invalid="ignore"):  # inf - inf where a perturbation diverged
-                g = (e[1 : p.size + 1] - e[p.size + 1 :]) / (2 * h)
+            if gradient == "central":
+                e = batch(np.vstack([p, p + np.diag(h), p - np.diag(h)]))
+                with np.errstate(invalid="ignore"):  # inf - inf where a perturbation diverged
+                    g = (e[1 : p.size + 1] - e[p.size + 1 :]) / (2 * h)
+            else:
+                e = batch(np.vstack([p, p + np.diag(h)]))
+                with np.errstate(invalid="ignore"):
+                    g = (e[1:] - e[0]) / h
             cache.clear()
             cache[key] = (float(e[0]) if np.isfinite(e[0]) else 1e10, np.where(np.isfinite(g), g, 0.0))
         return cache[key]

@@ -1,0 +1,167 @@
+"""rerun viewer sink: what a test engineer wants on screen while the rig runs (or a log replays).
+
+Entities (all on the timeline ``time``, seconds since the start of the stream):
+
+- ``accel/raw/{base,tip1,tip2}`` and ``accel/filtered/{...}``: accelerations, high-rate
+  scalars sent in columns (``rr.send_columns``), never one call per sample;
+- ``phase/tip1``: the filtered relative acceleration of tip 1, delay-embedded in 3D
+  (the last two seconds as a line strip), like the paper's phase portraits;
+- ``model/beam{1,2}/coefficients``: the current identified coefficients (bar chart);
+- ``model/beam{1,2}/z`` and ``.../z_pred``: measured and predicted relative
+  displacement over the last window (the identified model's prediction);
+- ``model/beam{1,2}/natural_frequency_hz``: the identified stiffness as a frequency;
+- ``regime``: the regime as a state timeline (``rr.StateChange``);
+- ``events``: regime changes, model changes, drops, reconnects (``rr.TextLog``).
+
+Modes: ``spawn`` (the native viewer, where there is a display; else ``web``),
+``web`` (gRPC server plus the web viewer on localhost, URL printed), ``save``
+(an .rrd file), ``none``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+CHANNELS = ("base", "tip1", "tip2")
+PHASE_DELAY_S = 1 / (4 * 12.3)  # a quarter period of the rig's excitation (the ACF's first zero)
+PHASE_SPAN_S = 2.0
+PHASE_EVERY_S = 0.2  # refresh the portrait five times per second of stream time
+VIEWER_MODES = ("spawn", "web", "save", "none")
+
+
+def blueprint():
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="accel/raw", name="raw acceleration [m/s^2]"),
+                rrb.TimeSeriesView(origin="accel/filtered", name="below 50 Hz [m/s^2]"),
+                rrb.StateTimelineView(origin="regime", name="regime"),
+                row_shares=[3, 3, 1],
+            ),
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="phase", name="embedded phase portrait (tip 1)"),
+                rrb.Horizontal(
+                    rrb.BarChartView(origin="model/beam1/coefficients", name="beam 1 coefficients"),
+                    rrb.BarChartView(origin="model/beam2/coefficients", name="beam 2 coefficients"),
+                ),
+                rrb.TimeSeriesView(origin="model", name="model prediction vs measurement",
+                                   contents=["model/beam1/z", "model/beam1/z_pred", "model/beam2/z",
+                                             "model/beam2/z_pred"]),
+                rrb.TextLogView(origin="events", name="events"),
+            ),
+        ),
+        collapse_panels=True,
+    )
+
+
+ENTITIES = ("accel/raw/base", "accel/raw/tip1", "accel/raw/tip2", "accel/filtered/base", "accel/filtered/tip1",
+            "accel/filtered/tip2", "phase/tip1", "model/beam1/coefficients", "model/beam2/coefficients",
+            "model/beam1/z", "model/beam1/z_pred", "model/beam2/z", "model/beam2/z_pred",
+            "model/beam1/natural_frequency_hz", "model/beam2/natural_frequency_hz", "regime", "events")
+
+
+def _has_display() -> bool:
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) or sys.platform == "darwin"
+
+
+class RerunViewer:
+    def __init__(self, mode: str, *, name: str = "shaker-rig", rrd_path: str | Path | None = None,
+                 fs_hz: float = 2000.0):
+        if mode not in VIEWER_MODES:
+            raise ValueError(f"unknown viewer {mode!r}; choose one of {', '.join(VIEWER_MODES)}")
+        self.mode = mode
+        self.fs_hz = fs_hz
+        self.url = None
+        self._rel = np.zeros((0,))
+        self._rel_t = np.zeros((0,))
+        if mode == "none":
+            self.rec = None
+            return
+        import rerun as rr
+
+        self.rr = rr
+        self.rec = rr.RecordingStream(name)
+        bp = blueprint()
+        if mode == "spawn" and not _has_display():
+            mode = self.mode = "web"
+            print("no display: serving the web viewer instead", file=sys.stderr)
+        if mode == "spawn":
+            self.rec.spawn(default_blueprint=bp)
+        elif mode == "web":
+            uri = self.rec.serve_grpc(default_blueprint=bp)
+            rr.serve_web_viewer(connect_to=uri, open_browser=False)
+            self.url = uri
+            print(f"web viewer on http://localhost:9090 (data at {uri})", file=sys.stderr)
+        else:
+            if rrd_path is None:
+                raise ValueError("--viewer save needs a file name for the .rrd")
+            self.rrd_path = Path(rrd_path)
+            self.rec.save(str(self.rrd_path), default_blueprint=bp)
+
+    def _time(self, t: np.ndarray):
+        return [self.rr.TimeColumn("time", duration=np.asarray(t, float))]
+
+    def _scalars(self, path: str, t: np.ndarray, v: np.ndarray) -> None:
+        self.rr.send_columns(path, indexes=self._time(t), columns=self.rr.Scalars.columns(scalars=v),
+                             recording=self.rec)
+
+    def log_step(self, out) -> None:
+        """One pipeline StepOutput (ident.pipeline)."""
+        if self.rec is None or len(out.t) == 0:
+            return
+        rr = self.rr
+        for j, ch in enumerate(CHANNELS):
+            self._scalars(f"accel/raw/{ch}", out.t, out.raw[:, j])
+            self._scalars(f"accel/filtered/{ch}", out.t, out.filtered[:, j])
+        self._phase(out.t, out.relative[:, 0])
+        for w in out.windows:
+            self.rec.set_time("time", duration=w.t_s)
+        for c in out.changes:
+            self.rec.set_time("time", duration=c.t_s)
+            self.rec.log("regime", rr.StateChange(state=c.regime))
+        if out.windows and not getattr(self, "_regime_started", False):
+            self._regime_started = True
+            self.rec.set_time("time", duration=out.windows[0].t_s)
+            self.rec.log("regime", rr.StateChange(state=out.windows[0].label))
+        for f in out.fits:
+            self.rec.set_time("time", duration=f.t_s)
+            for i, b in enumerate(f.beams):
+                pre = f"model/beam{i + 1}"
+                self.rec.log(f"{pre}/coefficients", rr.BarChart(b.model.coefficients[:, 1]))
+                self.rec.log(f"{pre}/natural_frequency_hz", rr.Scalars(b.natural_frequency_hz))
+                self._scalars(f"{pre}/z", f.t, f.measured[:, i, 0])
+                self._scalars(f"{pre}/z_pred", f.t, f.predicted[:, i, 0])
+        for e in out.events:
+            self.log_event(e)
+
+    def log_event(self, e: dict) -> None:
+        if self.rec is None:
+            return
+        self.rec.set_time("time", duration=float(e["t"]))
+        text = e.get("message") or ", ".join(f"{k}={v}" for k, v in e.items() if k not in ("t", "equations"))
+        level = "WARN" if e.get("kind") in ("drop", "crc", "disconnect", "reconnect") else "INFO"
+        self.rec.log("events", self.rr.TextLog(f"{e['kind']}: {text}", level=level))
+
+    def _phase(self, t: np.ndarray, rel: np.ndarray) -> None:
+        d = max(1, int(round(PHASE_DELAY_S * self.fs_hz)))
+        keep = int(PHASE_SPAN_S * self.fs_hz) + 2 * d
+        self._rel = np.concatenate([self._rel, rel])[-keep:]
+        self._rel_t = np.concatenate([self._rel_t, t])[-keep:]
+        if len(self._rel) <= 2 * d or self._rel_t[-1] - getattr(self, "_phase_t", -np.inf) < PHASE_EVERY_S:
+            return
+        self._phase_t = float(self._rel_t[-1])
+        pts = np.column_stack([self._rel[2 * d:], self._rel[d:-d], self._rel[:-2 * d]])[::4]
+        self.rec.set_time("time", duration=float(self._rel_t[-1]))
+        self.rec.log("phase/tip1", self.rr.LineStrips3D([pts]))
+
+    def close(self) -> None:
+        if self.rec is not None:
+            self.rec.flush()
+            if self.mode == "save":
+                self.rec.disconnect()
