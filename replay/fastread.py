@@ -91,7 +91,7 @@ def _scan(path: str | Path) -> _Scan:
 
 
 def read_raw_samples(path: str | Path):
-    """(seq, values (n, 3) m/s^2, metadata) from the raw channel, or None when it has no raw bytes."""
+    """(seq, values (n, 3) m/s^2, rate from the device clock) from the raw channel, or None."""
     scan = _scan(path)
     cal = scan.meta.get("calibration")
     if scan.raw_channel is None or not scan.raw or cal is None:
@@ -107,4 +107,6 @@ def read_raw_samples(path: str | Path):
     names = ("base", "tip1", "tip2")
     scale = np.array([float(cal[f"{c}.scale_m_per_s2_per_count"]) for c in names])
     offset = np.array([float(cal[f"{c}.offset_m_per_s2"]) for c in names])
-    return seq[keep], fr.counts[keep].astype(np.float64) * scale + offset, scan.meta
+    t_us = fr.t_us[keep].astype(np.float64)
+    fs = float(1e6 / np.median(np.diff(t_us))) if t_us.size > 1 else float("nan")
+    return seq[keep], fr.counts[keep].astype(np.float64) * scale + offset, fs

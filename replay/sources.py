@@ -112,11 +112,8 @@ def read_mcap(path: str | Path) -> Samples:
     except (ValueError, struct.error, zstandard.ZstdError):
         fast = None
     if fast is not None and len(fast[0]) >= 2:
-        seq, values, meta = fast
-        try:
-            fs = float(meta["session"]["rate_hz"])
-        except (KeyError, ValueError):
-            fs = None
+        seq, values, fs = fast
+        fs = fs if np.isfinite(fs) and fs > 0 else None
     if fs is None:
         rec = read_recording(path, raw=False)
         if len(rec.seq) < 2:

@@ -1,0 +1,179 @@
+"""replay: the live pipeline on recordings and CSVs, pacing, info/export/import, the rerun viewer."""
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daq.viewer import ENTITIES
+from replay.play import play
+from replay.reader import read_recording
+from replay.sources import read_csv, read_mcap
+
+REC = Path(__file__).resolve().parents[1] / "recordings"
+
+
+def cli(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True, timeout=timeout)
+
+
+def rerun_cli(*args):
+    exe = os.path.join(os.path.dirname(sys.executable), "rerun")
+    return subprocess.run([exe, *args], capture_output=True, text=True, timeout=120)
+
+
+def test_example_recordings_are_small_and_complete():
+    files = sorted(REC.glob("*.mcap"))
+    assert {f.stem for f in files} == {"linear", "localized-1", "localized-2", "impacting-both", "transitions"}
+    for f in files:
+        assert f.stat().st_size < 2 * 1024 * 1024, f
+        rec = read_recording(f, raw=False)
+        assert np.all(np.diff(rec.seq) == 1)
+
+
+def test_fast_raw_path_equals_the_json_samples():
+    f = REC / "localized-1.mcap"
+    s = read_mcap(f)
+    rec = read_recording(f, raw=False)
+    assert np.array_equal(s.seq, rec.seq)
+    np.testing.assert_allclose(s.values, rec.values, atol=1e-5, rtol=1e-5)  # JSON keeps 6 digits
+    assert s.fs_hz == pytest.approx(2000.0)
+    assert read_mcap(REC / "transitions.mcap").fs_hz == pytest.approx(1000.0)
+
+
+@pytest.mark.parametrize("name,regime", [("linear", None), ("localized-1", "localized-1"),
+                                         ("localized-2", "localized-2"),
+                                         ("impacting-both", "impacting-both")])
+def test_each_example_shows_its_regime(name, regime):
+    changes = []
+    play(read_mcap(REC / f"{name}.mcap"), rate=None, identify=False,
+         on_step=lambda out: changes.extend(out.changes))
+    assert [c.regime for c in changes] == ([regime] if regime else [])
+    if regime:
+        assert 3.0 <= changes[0].t_s <= 4.0  # the blow came at 3 s
+
+
+def test_transitions_events_file_and_viewer(tmp_path):
+    ev, rrd = tmp_path / "ev.jsonl", tmp_path / "tr.rrd"
+    p = cli("replay", str(REC / "transitions.mcap"), "--max", "--events", str(ev), "--viewer", "save",
+            "--rrd", str(rrd))
+    assert p.returncode == 0, p.stderr
+    events = [json.loads(line) for line in ev.read_text().splitlines()]
+    assert all("t" in e and "kind" in e for e in events)
+    regimes = [e["regime"] for e in events if e["kind"] == "regime"]
+    assert regimes == ["localized-1", "linear", "localized-2", "linear", "impacting-both"]
+    times = [e["t"] for e in events if e["kind"] == "regime"]
+    for t_true, t in zip([4.03, 8.0, 12.0, 16.0, 20.04], times):
+        assert 0 <= t - t_true <= 1.5, (t_true, t)  # amplitude drops take a few cycles to stop the impacts
+    assert rerun_cli("rrd", "verify", str(rrd)).returncode == 0
+    stats = rerun_cli("rrd", "stats", str(rrd)).stdout
+    for entity in ENTITIES:
+        assert f"/{entity}:" in stats, entity
+
+
+def test_pacing_holds_recorded_time_without_drift():
+    s = read_mcap(REC / "linear.mcap")  # 10 s
+    for rate in (1.0, 4.0):
+        t0 = time.monotonic()
+        rep = play(s, rate=rate)
+        wall = time.monotonic() - t0
+        assert wall == pytest.approx(10.0 / rate, rel=0.01), (rate, wall)
+        assert rep.stream_s == pytest.approx(10.0)
+
+
+def test_start_duration_and_loop():
+    s = read_mcap(REC / "linear.mcap")
+    rep = play(s, rate=None, start_s=2.0, duration_s=3.0, identify=False)
+    assert rep.samples == 6000
+    rep = play(s, rate=None, duration_s=1.0, loop=True, max_loops=3, identify=False)
+    assert rep.samples == 3 * 2000 and rep.stream_s == pytest.approx(3.0)
+
+
+def test_info_reports_drops(tmp_path):
+    cfg = tmp_path / "drops.yaml"
+    cfg.write_text("daq:\n  faults:\n    drop_frame_rate: 0.01\n")
+    out = tmp_path / "drops.mcap"
+    p = cli("daq", "record", "--port", f"rig://?config={cfg}", "--config", str(cfg), "--duration", "5", "-o",
+            str(out), "--quiet", "--no-identify")
+    assert p.returncode == 0, p.stderr
+    rec = read_recording(out, raw=False)
+    lost = int(np.sum(np.diff(rec.seq) - 1))
+    assert 50 < lost < 150  # 1 % of 10,000 frames
+    info = cli("replay", "info", str(out))
+    assert info.returncode == 0
+    assert f"drops      {lost} frame(s)" in info.stdout
+    assert "rate       2000.000 Hz" in info.stdout
+    # replay fills the holes so the pipeline's clock stays right
+    s = read_mcap(out)
+    assert len(s.t) == len(rec.seq) + lost
+
+
+def test_export_import_round_trip(tmp_path):
+    csv_path, back = tmp_path / "x.csv", tmp_path / "back.mcap"
+    assert cli("replay", "export", str(REC / "localized-2.mcap"), "--csv", str(csv_path)).returncode == 0
+    p = cli("replay", "import", str(csv_path), "-o", str(back), "--time", "t")
+    assert p.returncode == 0, p.stderr
+    a = read_recording(REC / "localized-2.mcap", raw=False)
+    b = read_recording(back, raw=False)
+    np.testing.assert_allclose(b.values, a.values, rtol=1e-5, atol=1e-5)
+    assert read_mcap(back).fs_hz == pytest.approx(2000.0, rel=1e-6)  # JSON path (no raw bytes)
+
+
+def test_csv_from_another_daq_with_other_column_names(tmp_path):
+    s = read_mcap(REC / "localized-1.mcap")
+    path = tmp_path / "other.csv"
+    np.savetxt(path, s.values[:8000], delimiter=",", header="shaker,bladeA,bladeB", comments="")
+    p = cli("replay", str(path), "--fs", "2000", "--base", "shaker", "--tip1", "bladeA", "--tip2", "bladeB",
+            "--max", "--no-identify")
+    assert p.returncode == 0, p.stderr
+    assert "regime localized-1" in p.stdout
+    c = read_csv(path, fs_hz=2000.0, base="shaker", tip1="bladeA", tip2="bladeB")
+    np.testing.assert_allclose(c.values, s.values[:8000], rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize("content,args,match", [
+    ("a,b,c\n1,2,3\n", ["--fs", "100"], "no column 'base'"),
+    ("base,tip1,tip2\n1,2,3\n1,nan,3\n1,2,3\n", ["--fs", "100"], "line 3 holds NaN"),
+    ("base,tip1,tip2\n1,2,3\n1,x,3\n", ["--fs", "100"], "line 3 has a missing or non-numeric value"),
+    ("t,base,tip1,tip2\n0,1,2,3\n0.1,1,2,3\n0.5,1,2,3\n", ["--time", "t"], "not uniformly sampled"),
+    ("base,tip1,tip2\n1,2,3\n1,2,3\n", [], "exactly one of --time COL or --fs HZ"),
+])
+def test_bad_csv_is_one_line_exit_2(tmp_path, content, args, match):
+    path = tmp_path / "bad.csv"
+    path.write_text(content)
+    p = cli("replay", str(path), "--max", *args)
+    assert p.returncode == 2
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and match in lines[0] and "Traceback" not in p.stderr
+
+
+def test_bad_files_are_one_line_exit_2(tmp_path):
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"not an mcap at all")
+    for args in (["replay", str(junk), "--max"], ["replay", "info", str(junk)],
+                 ["replay", str(tmp_path / "missing.mcap")], ["replay", str(tmp_path / "x.wav")],
+                 ["replay", str(REC / "linear.mcap"), "--start", "99"]):
+        p = cli(*args)
+        assert p.returncode == 2, args
+        assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, (args, p.stderr)
+
+
+def test_live_record_writes_regime_events_to_mcap_and_jsonl(tmp_path):
+    cfg = tmp_path / "kick.yaml"
+    cfg.write_text("excitation:\n  ramp_s: 1.0\n  kicks:\n    - {t_s: 3.0285, beam: 2, velocity_m_per_s: 0.3}\n")
+    out, ev = tmp_path / "live.mcap", tmp_path / "live.jsonl"
+    p = cli("daq", "record", "--sim", "--config", str(cfg), "--duration", "8", "-o", str(out), "--events", str(ev),
+            "--viewer", "save", "--quiet")
+    assert p.returncode == 0, p.stderr
+    assert "model updates" in p.stdout and "latency" in p.stdout
+    rec = read_recording(out, raw=False)
+    reg = [e for e in rec.events if e["kind"] == "regime"]
+    assert [e["regime"] for e in reg] == ["localized-2"]
+    lines = [json.loads(x) for x in ev.read_text().splitlines()]
+    assert any(e["kind"] == "regime" and e["regime"] == "localized-2" for e in lines)
+    assert rerun_cli("rrd", "verify", str(out.with_suffix(".rrd"))).returncode == 0
