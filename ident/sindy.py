@@ -86,14 +86,26 @@ def _check_data(x: np.ndarray, dxdt: np.ndarray | None, t: np.ndarray, forcing: 
         raise ValueError("the library has a forcing column F: pass the forcing signal")
 
 
+def _lstsq(theta: np.ndarray, y: np.ndarray, ridge: float) -> np.ndarray:
+    """Least squares, with ridge ``ridge * N`` on unit-RMS columns when ridge > 0."""
+    if ridge <= 0:
+        return np.linalg.lstsq(theta, y, rcond=None)[0]
+    k = theta.shape[1]
+    aug = np.vstack([theta, np.sqrt(ridge * theta.shape[0]) * np.eye(k)])
+    pad = np.zeros((k,) + y.shape[1:])
+    return np.linalg.lstsq(aug, np.concatenate([y, pad]), rcond=None)[0]
+
+
 def stlsq(theta: np.ndarray, dxdt: np.ndarray, threshold: float, max_iter: int = 20,
-          initial: np.ndarray | None = None) -> np.ndarray:
+          initial: np.ndarray | None = None, ridge: float = 0.0) -> np.ndarray:
     """Sequentially thresholded least squares (Brunton et al. 2016, Algorithm in SI).
 
     Coefficients with magnitude below ``threshold`` are zeroed and the rest re-fitted,
     until the active set stops changing. ``initial`` warm-starts the active set.
+    ``ridge`` > 0 adds Tikhonov regularisation (as pysindy's STLSQ ``alpha``),
+    for libraries whose columns are nearly collinear (single-tone steady states).
     """
-    xi = np.linalg.lstsq(theta, dxdt, rcond=None)[0] if initial is None else np.array(initial, float)
+    xi = _lstsq(theta, dxdt, ridge) if initial is None else np.array(initial, float)
     for _ in range(max_iter):
         small = np.abs(xi) < threshold
         xi[small] = 0.0
@@ -102,7 +114,7 @@ def stlsq(theta: np.ndarray, dxdt: np.ndarray, threshold: float, max_iter: int =
             big = ~small[:, i]
             if not big.any():
                 continue
-            new = np.linalg.lstsq(theta[:, big], dxdt[:, i], rcond=None)[0]
+            new = _lstsq(theta[:, big], dxdt[:, i], ridge)
             if np.any(np.abs(new) < threshold):
                 changed = True
             xi[big, i] = new
@@ -123,7 +135,7 @@ def integration_errors(sim_x: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 def sweep(library: PolynomialForcingLibrary, x: np.ndarray, dxdt: np.ndarray, t: np.ndarray,
           forcing: np.ndarray | None = None, *, tolerance: float = 0.5, bound_factor: float = 20.0,
-          max_candidates: int = 200) -> SweepResult:
+          max_candidates: int = 200, ridge: float = 0.0) -> SweepResult:
     """Sparsification sweep chosen by integration error (Stender et al. 2019)."""
     x = np.asarray(x, float)
     dxdt = np.asarray(dxdt, float)
@@ -136,7 +148,7 @@ def sweep(library: PolynomialForcingLibrary, x: np.ndarray, dxdt: np.ndarray, t:
     scale = np.sqrt(np.mean(theta**2, axis=0))
     scale[scale == 0] = 1.0
     theta_n = theta / scale
-    xi0 = np.linalg.lstsq(theta_n, dxdt, rcond=None)[0]
+    xi0 = _lstsq(theta_n, dxdt, ridge)
     mags = np.unique(np.abs(xi0[xi0 != 0]))
     # Thresholds between consecutive magnitudes give every count from all to none.
     lambdas = np.concatenate([[0.0], 0.5 * (mags[:-1] + mags[1:]), [mags[-1] * 1.01 if mags.size else 1.0]])
@@ -144,7 +156,7 @@ def sweep(library: PolynomialForcingLibrary, x: np.ndarray, dxdt: np.ndarray, t:
         lambdas = np.quantile(lambdas, np.linspace(0, 1, max_candidates))
     cands: dict[bytes, tuple[float, np.ndarray]] = {}
     for lam in lambdas:
-        xi = stlsq(theta_n, dxdt, lam) / scale[:, None]
+        xi = stlsq(theta_n, dxdt, lam, ridge=ridge) / scale[:, None]
         key = (xi != 0).tobytes()
         cands.setdefault(key, (float(lam), xi))
     lams = np.array([v[0] for v in cands.values()])
@@ -238,14 +250,14 @@ def refine(library: PolynomialForcingLibrary, coefs: np.ndarray, x: np.ndarray, 
 
 def identify(x: np.ndarray, dxdt: np.ndarray, t: np.ndarray, forcing: np.ndarray | None = None, *,
              degree: int = 3, state_names: tuple[str, ...] | None = None, do_refine: bool = True,
-             tolerance: float = 0.5, rel_bound: float = 0.5) -> Identification:
+             tolerance: float = 0.5, rel_bound: float = 0.5, ridge: float = 0.0) -> Identification:
     """The paper's pipeline on given states and derivatives: library, sweep, refinement."""
     x = np.asarray(x, float)
     if x.ndim == 1:
         x = x[:, None]
     dxdt = np.asarray(dxdt, float).reshape(x.shape[0], -1)
     lib = PolynomialForcingLibrary(x.shape[1], degree, forcing is not None, state_names)
-    sw = sweep(lib, x, dxdt, t, forcing, tolerance=tolerance)
+    sw = sweep(lib, x, dxdt, t, forcing, tolerance=tolerance, ridge=ridge)
     sparse = SindyModel(lib, sw.coefficients[sw.chosen])
     if not do_refine:
         return Identification(sparse, sparse, sw, None)
