@@ -22,6 +22,8 @@ LINE_BYTES_PER_S = LINE_BAUD / 10  # 8N1: 10 bits per byte
 def add_parser(sub) -> None:
     p = sub.add_parser("bench", help="benchmarks: decoder throughput, bytes per sample, CPU share")
     p.add_argument("--seconds", type=float, default=10.0, help="length of the recording runs (default 10)")
+    p.add_argument("--live", action="store_true",
+                   help="also the live pipeline: replay --max speed, latency, CPU share of identification")
     p.set_defaults(func=run)
 
 
@@ -75,4 +77,45 @@ def run(args) -> int:
           f"{100 * share_sim:5.1f} %; recording adds {100 * (share_rec - share_sim):5.1f} % "
           f"(ratio {share_rec / share_sim if share_sim > 0 else np.inf:4.1f}); start-up "
           f"{c_start:.2f} s CPU subtracted")
+    if args.live:
+        _live(args, py, c_start, w_start)
     return 0
+
+
+def _live(args, py, c_start, w_start) -> None:
+    """Live pipeline: replay --max with and without identification; latency and CPU of daq record."""
+    import re
+
+    import numpy as np
+
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = Path(tmp) / "kick.yaml"
+        cfg.write_text("excitation:\n  ramp_s: 1.0\n  kicks:\n    - {t_s: 20.0447, beam: 1, velocity_m_per_s: 0.3}\n")
+        rec = Path(tmp) / "rec60.mcap"
+        subprocess.run(py + ["record", "--port", f"rig://?config={cfg}", "--config", str(cfg), "--duration", "60",
+                             "-o", str(rec), "--quiet", "--no-identify"], check=True, stdout=subprocess.DEVNULL)
+        replay = [sys.executable, "-m", "replay", str(rec), "--max"]
+
+        def speed(extra):
+            out = subprocess.run(replay + extra, check=True, capture_output=True, text=True).stdout
+            return float(re.search(r"\(([\d.]+) x real time\)", out).group(1))
+
+        with_id = [speed([]) for _ in range(3)]
+        without = [speed(["--no-identify"]) for _ in range(3)]
+        print(f"replay --max : {np.median(with_id):6.0f} x real time with identification, "
+              f"{np.median(without):6.0f} x without (60 s recording with a regime change; medians of 3)")
+        out = Path(tmp) / "live.mcap"
+        c0, t0 = _child_cpu(), time.perf_counter()
+        res = subprocess.run(py + ["record", "--sim", "--config", str(cfg), "--duration", "30", "-o", str(out),
+                                   "--quiet"], check=True, capture_output=True, text=True)
+        c_live, w_live = _child_cpu() - c0, time.perf_counter() - t0
+        c_rec, w_rec = _timed(py + ["record", "--sim", "--config", str(cfg), "--duration", "30", "-o",
+                                    str(Path(tmp) / "plain.mcap"), "--quiet", "--no-identify"])
+        lat = re.search(r"p50 (\d+) ms, p95 (\d+) ms", res.stdout)
+        share_live = (c_live - c_start) / (w_live - w_start)
+        share_rec = (c_rec - c_start) / (w_rec - w_start)
+        print(f"live record  : CPU {100 * share_live:5.1f} % of one core with the pipeline, {100 * share_rec:5.1f} % "
+              f"recording only; the pipeline adds {100 * (share_live - share_rec):5.1f} %")
+        if lat:
+            print(f"latency      : sample arrival -> model update that includes it: p50 {lat.group(1)} ms, "
+                  f"p95 {lat.group(2)} ms (hop 1 s, window 4 s)")
