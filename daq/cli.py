@@ -26,8 +26,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", type=Path, help="MCAP file to write (default rig-YYYYmmdd-HHMMSS.mcap)")
     r.add_argument("--duration", type=float, help="stop after this many seconds of samples")
     r.add_argument("--quiet", action="store_true", help="no live status line")
-    r.add_argument("--viewer", choices=("spawn", "web", "save", "none"), default="none",
-                   help="rerun viewer: spawn, web, save (an .rrd next to the recording) or none (default)")
+    r.add_argument("--viewer", choices=("auto", "spawn", "web", "save", "none"), default="auto",
+                   help="rerun viewer: spawn, web, save (an .rrd next to the recording), none; auto (default): "
+                        "spawn or web in an interactive terminal, none otherwise")
     r.add_argument("--events", type=Path, help="also write events as JSON lines here")
     r.add_argument("--no-identify", action="store_true", help="record only: no filters, regimes, SINDy")
     r.set_defaults(func=record)

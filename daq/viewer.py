@@ -13,7 +13,8 @@ Entities (all on the timeline ``time``, seconds since the start of the stream):
 - ``regime``: the regime as a state timeline (``rr.StateChange``);
 - ``events``: regime changes, model changes, drops, reconnects (``rr.TextLog``).
 
-Modes: ``spawn`` (the native viewer, where there is a display; else ``web``),
+Modes: ``auto`` (``spawn`` in an interactive terminal, else ``none``),
+``spawn`` (the native viewer, where there is a display; else ``web``),
 ``web`` (gRPC server plus the web viewer on localhost, URL printed), ``save``
 (an .rrd file), ``none``.
 """
@@ -30,7 +31,7 @@ CHANNELS = ("base", "tip1", "tip2")
 PHASE_DELAY_S = 1 / (4 * 12.3)  # a quarter period of the rig's excitation (the ACF's first zero)
 PHASE_SPAN_S = 2.0
 PHASE_EVERY_S = 0.2  # refresh the portrait five times per second of stream time
-VIEWER_MODES = ("spawn", "web", "save", "none")
+VIEWER_MODES = ("auto", "spawn", "web", "save", "none")
 
 
 def blueprint():
@@ -75,6 +76,8 @@ class RerunViewer:
                  fs_hz: float = 2000.0):
         if mode not in VIEWER_MODES:
             raise ValueError(f"unknown viewer {mode!r}; choose one of {', '.join(VIEWER_MODES)}")
+        if mode == "auto":  # show it to a person at a terminal; stay quiet in scripts, tests and CI
+            mode = "spawn" if sys.stdout.isatty() and sys.stdin.isatty() else "none"
         self.mode = mode
         self.fs_hz = fs_hz
         self.url = None

@@ -49,8 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--start", type=float, default=0.0, help="start this many seconds into the data")
     pl.add_argument("--duration", type=float, help="play this many seconds")
     pl.add_argument("--loop", action="store_true", help="start again at the end, until Ctrl-C")
-    pl.add_argument("--viewer", choices=("spawn", "web", "save", "none"), default="none",
-                    help="rerun viewer: spawn, web, save (an .rrd next to the input) or none (default)")
+    pl.add_argument("--viewer", choices=("auto", "spawn", "web", "save", "none"), default="auto",
+                    help="rerun viewer: spawn, web, save (an .rrd next to the input), none; auto (default): "
+                         "spawn or web in an interactive terminal, none otherwise")
     pl.add_argument("--rrd", type=Path, help="with --viewer save: the .rrd to write")
     pl.add_argument("--events", type=Path, help="write events as JSON lines here")
     pl.add_argument("--no-identify", action="store_true", help="filters and regimes only")
