@@ -37,8 +37,17 @@ def _convert(value: Any, tp: Any, where: str, source: str) -> Any:
         return build(tp, value, source, where)
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            if isinstance(value, str) and value.strip().lower() in ("inf", ".inf", "infinity"):
-                return math.inf
+            if isinstance(value, str):
+                text = value.strip().lower()
+                if text in ("inf", ".inf", "+.inf", "infinity"):
+                    return math.inf
+                try:  # PyYAML reads 3.0e6 (no sign in the exponent, YAML 1.1) as a string
+                    number = float(text)
+                except ValueError:
+                    pass
+                else:
+                    if not math.isnan(number):
+                        return number
             raise ValueError(f"{source}: {where} must be a number, got {value!r}")
         return float(value)
     if tp is int:

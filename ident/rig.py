@@ -291,3 +291,27 @@ def simulate_rig(config: RigConfig, duration_s: float, rate_hz: float = 2000.0,
     if n < 1:
         raise ValueError(f"duration {duration_s} s at {rate_hz} Hz gives no sample")
     return RigSimulator(config, rate_hz, state).advance(n)
+
+
+def simulate_measured_base(params: RigParams, base: np.ndarray, fs_hz: float, substeps: int = 8,
+                           state: np.ndarray | None = None) -> RigOutput:
+    """The rig driven by a *measured* base acceleration (samples at ``fs_hz``), linear between samples.
+
+    Output sample k is the response at the time of base sample k (the first one is the initial state).
+    """
+    base = np.asarray(base, float)
+    if base.ndim != 1 or base.size < 2:
+        raise ValueError("base acceleration must be a 1-D series of at least 2 samples")
+    if not np.all(np.isfinite(base)):
+        raise ValueError("base acceleration contains NaN or inf")
+    n = base.size - 1
+    k = np.arange(n * substeps + 1) / substeps
+    ab = np.interp(k, np.arange(base.size), base)
+    st = np.zeros(4) if state is None else np.asarray(state, float)
+    _, out = integrate(params, st, ab, 1.0 / fs_hz, substeps)
+    # prepend the initial sample so outputs align with the input samples
+    a0 = np.zeros(2)
+    _accel(params.vector(), st[:2].copy(), st[2:].copy(), base[0], np.zeros(2), a0, np.zeros(2, np.int64))
+    first = lambda arr, v: np.concatenate([np.asarray(v)[None], arr])  # noqa: E731
+    return RigOutput(base, first(out.tip1, a0[0] + base[0]), first(out.tip2, a0[1] + base[0]),
+                     first(out.z, st[:2]), first(out.v, st[2:]), first(out.contact, np.zeros(2, np.int8)))

@@ -146,6 +146,7 @@ def test_sigterm_finishes_the_file(tmp_path):
 @pytest.mark.parametrize("text,match", [
     (None, "config file not found"),
     ("rig: {beam1: {mass_kg: heavy}}", "rig.beam1.mass_kg must be a number"),
+    ("rig: {beam1: {mass_kg: nan}}", "rig.beam1.mass_kg must be a number"),
     ("rig: {beam3: {}}", "unknown key 'rig.beam3'"),
     ("daq: {rate_hz: -5}", "daq.rate_hz = -5.0 is out of range"),
     ("rig: [unclosed", "not valid YAML"),

@@ -31,13 +31,14 @@ def run_guarded(prog: str, func: Callable[[argparse.Namespace], int], args: argp
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import bench, duffing_report, fit
+    from . import bench, discover, duffing_report, fit
 
     parser = OneLineParser(prog="ident", description="SINDy identification of forced vibrations "
                            "(Lubricants 2019, 7(8), 64)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     duffing_report.add_parser(sub)
     fit.add_parser(sub)
+    discover.add_parser(sub)
     bench.add_parser(sub)
     return parser
 

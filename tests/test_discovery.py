@@ -1,0 +1,110 @@
+"""Discovery: hidden effects in simulated rig data, found from the data and the nominal model only."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ident.discovery import discover, hidden_case, nominal_params
+
+
+@pytest.fixture(scope="module")
+def results():
+    """The first 12 seeded cases of the benchmark (`ident bench discovery` runs 40)."""
+    out = []
+    for seed in range(12):
+        c = hidden_case(seed)
+        out.append((c, discover(c.values, c.fs_hz, c.nominal)))
+    return out
+
+
+def test_cases_cover_the_catalogue_and_none(results):
+    assert {c.effect for c, _ in results} >= {"none", "contact", "coulomb_friction", "quadratic_damping",
+                                              "cubic_stiffness"}
+
+
+def test_effect_and_response_named_right(results):
+    right = 0
+    for c, d in results:
+        top = d.findings[0] if d.findings else None
+        named = top.effect if top else "none"
+        right += named == c.effect and (c.effect == "none" or top.response == f"tip{c.beam}")
+    assert right >= 11, right  # the 40-case benchmark names 97.5 % right
+
+
+def test_nothing_found_when_nothing_is_hidden(results):
+    nones = [d for c, d in results if c.effect == "none"]
+    assert len(nones) >= 2
+    assert all(d.findings == [] for d in nones)
+
+
+def test_parameters_and_gains(results):
+    for c, d in results:
+        if c.effect == "none" or not d.findings or d.findings[0].effect != c.effect:
+            continue
+        f = d.findings[0]
+        key = "gap" if c.effect == "contact" else next(iter(c.truth))
+        err = abs(f.parameters[key] / c.truth[key] - 1)
+        if c.effect == "contact":
+            assert f.parameters["side"] == c.truth["side"]
+            assert err < 0.12, (c, f.parameters)  # median 4 % over 40 cases; the issue asks 5 %
+        elif c.effect == "coulomb_friction":
+            assert err < 0.30, err  # median 1 %, one case of 40 at 28.5 % (under amplitude steps)
+        else:
+            assert err < 0.10, (c.effect, err)
+        assert f.gain > 0.15  # the extended model beats the baseline on held-out data
+
+
+def test_discover_command_on_a_recording(tmp_path):
+    """A recording of a rig with a hidden cubic stiffness on beam 2; the user's model has none."""
+    truth = tmp_path / "truth.yaml"
+    truth.write_text("rig:\n  beam1: {gap_pos_m: .inf, gap_neg_m: .inf}\n"
+                     "  beam2: {gap_pos_m: .inf, gap_neg_m: .inf, cubic_stiffness_n_per_m3: 3.0e6}\n"
+                     "excitation:\n  amplitude_m_per_s2: 1.0\n  ramp_s: 1.0\n"
+                     "  steps: [{t_s: 8, amplitude_m_per_s2: 2.5}, {t_s: 16, amplitude_m_per_s2: 1.5}]\n")
+    nominal = tmp_path / "nominal.yaml"
+    nominal.write_text("rig:\n  beam1: {gap_pos_m: .inf, gap_neg_m: .inf}\n  beam2: {gap_pos_m: .inf, "
+                       "gap_neg_m: .inf}\n")
+    rec = tmp_path / "hidden.mcap"
+    p = subprocess.run([sys.executable, "-m", "daq", "record", "--port", f"rig://?config={truth}", "--config",
+                        str(truth), "--duration", "24", "-o", str(rec), "--quiet", "--no-identify"],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    out = tmp_path / "d.json"
+    p = subprocess.run([sys.executable, "-m", "ident", "discover", str(rec), "--model", str(nominal), "--json",
+                        str(out), "--report", str(tmp_path / "rep")], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    js = json.loads(out.read_text())
+    assert js["findings"][0]["effect"] == "cubic_stiffness" and js["findings"][0]["response"] == "tip2"
+    assert js["findings"][0]["parameters"]["coefficient_per_mass"] == pytest.approx(3.0e6 / 0.04, rel=0.1)
+    assert js["gain"] == pytest.approx(1 - js["extended"]["test_nrmse"] / js["baseline"]["test_nrmse"])
+    assert js["gain"] > 0.5
+    assert (tmp_path / "rep" / "residual_portraits.png").exists()
+
+
+@pytest.mark.parametrize("args,match", [
+    (["--train", "5"], "START:STOP"),
+    (["--train", "0:50"], "at least 100"),
+    (["--model", "/nonexistent.yaml"], "model file not found"),
+])
+def test_bad_arguments_are_one_line_exit_2(tmp_path, args, match):
+    from pathlib import Path
+
+    rec = Path(__file__).resolve().parents[1] / "recordings" / "linear.mcap"
+    model = tmp_path / "m.yaml"
+    model.write_text("{}\n")
+    base = ["--model", str(model)] if "--model" not in args else []
+    p = subprocess.run([sys.executable, "-m", "ident", "discover", str(rec), *base, *args], capture_output=True,
+                       text=True, timeout=120)
+    assert p.returncode == 2
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and match in lines[0]
+
+
+def test_bad_data():
+    with pytest.raises(ValueError, match="NaN"):
+        discover(np.full((50000, 3), np.nan), 2000.0, nominal_params())
+    with pytest.raises(ValueError, match="too few"):
+        discover(np.zeros((100, 3)), 2000.0, nominal_params())
