@@ -108,3 +108,21 @@ def test_bad_data():
         discover(np.full((50000, 3), np.nan), 2000.0, nominal_params())
     with pytest.raises(ValueError, match="too few"):
         discover(np.zeros((100, 3)), 2000.0, nominal_params())
+
+
+def test_linear_baseline_path_finds_friction_and_nothing_when_nothing_is_hidden():
+    """The generic path (a linear baseline fitted on the training segment): weaker than the rig path."""
+    from ident.linear_discovery import discover_linear
+
+    c = hidden_case(11)  # Coulomb friction on beam 1
+    assert c.effect == "coulomb_friction" and c.beam == 1
+    d = discover_linear(c.values[:, 0], c.values[:, 1:], ["tip1", "tip2"], ["acceleration"] * 2,
+                        "base_acceleration", c.fs_hz)
+    assert d.findings[0]["effect"] == "coulomb_friction" and d.findings[0]["response"] == "tip1"
+    assert d.findings[0]["parameters"]["force_per_mass"] == pytest.approx(c.truth["force_per_mass"], rel=0.1)
+    assert d.extended_test_nrmse < d.baseline_test_nrmse
+    c0 = hidden_case(1)
+    assert c0.effect == "none"
+    d0 = discover_linear(c0.values[:, 0], c0.values[:, 1:], ["tip1", "tip2"], ["acceleration"] * 2,
+                         "base_acceleration", c0.fs_hz)
+    assert d0.findings == []
