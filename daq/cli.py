@@ -31,6 +31,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "spawn or web in an interactive terminal, none otherwise")
     r.add_argument("--events", type=Path, help="also write events as JSON lines here")
     r.add_argument("--no-identify", action="store_true", help="record only: no filters, regimes, SINDy")
+    r.add_argument("--window", type=float, default=4.0, help="rolling SINDy window [s] (default 4)")
+    r.add_argument("--hop", type=float, default=1.0, help="rolling SINDy hop [s] (default 1)")
     r.set_defaults(func=record)
     s = sub.add_parser("sim", help="serve the simulated rig on a pty and print its path")
     s.add_argument("--config", type=Path, help="rig and daq config (YAML)")
@@ -94,14 +96,17 @@ def record(args) -> int:
     acq = Acquisition(port, cfg)
     last_status = [time.monotonic()]
     live = None if args.no_identify else LiveProcessing(cfg.daq.rate_hz, args.viewer, out.with_suffix(".rrd"),
-                                                         args.events)
+                                                         args.events, args.window, args.hop)
 
     def on_block(b):
         rec.write_block(b)
         if live is not None:
             live.submit(b)
-            for e in live.drain_events():
+            events, models = live.drain()
+            for e in events:
                 rec.write_event(e)
+            for m in models:
+                rec.write_model(m)
         now = time.monotonic()
         if now - last_status[0] >= 1.0:
             last_status[0] = now
@@ -125,8 +130,11 @@ def record(args) -> int:
     finally:
         if live is not None:
             live.close()
-            for e in live.drain_events():
+            events, models = live.drain()
+            for e in events:
                 rec.write_event(e)
+            for m in models:
+                rec.write_model(m)
         rec.write_status(acq.status())
         rec.close()
         if server is not None:
@@ -146,6 +154,13 @@ def record(args) -> int:
     return 0
 
 
+def model_records(fit) -> list[dict]:
+    """One record per beam of a rolling-window fit: the model as a time series entry."""
+    return [{"t": fit.t_s, "beam": i + 1, "equations": b.model.equations(), "coefficients": b.model.as_dict(),
+             "active": list(b.active), "integration_nrmse": b.error, "natural_frequency_hz": b.natural_frequency_hz,
+             "stiffness_per_mass": b.stiffness_per_mass, "changed": b.changed} for i, b in enumerate(fit.beams)]
+
+
 class LiveProcessing:
     """The pipeline beside acquisition, in a worker thread, so a slow model fit never stalls the port.
 
@@ -154,15 +169,16 @@ class LiveProcessing:
     threads). Latency: from a block's arrival to the model update that includes it.
     """
 
-    def __init__(self, fs_hz: float, viewer_mode: str, rrd_path: Path, events_path: Path | None):
+    def __init__(self, fs_hz: float, viewer_mode: str, rrd_path: Path, events_path: Path | None,
+                 window_s: float = 4.0, hop_s: float = 1.0):
         import queue
 
-        from ident.pipeline import Pipeline, PipelineConfig
+        from ident.pipeline import Pipeline, PipelineConfig, rolling_config
 
         from .eventlog import JsonlEvents
         from .viewer import RerunViewer
 
-        self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz))
+        self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, rolling=rolling_config(fs_hz, window_s, hop_s)))
         self.viewer = RerunViewer(viewer_mode, rrd_path=rrd_path, fs_hz=fs_hz)
         self.jsonl = JsonlEvents(events_path) if events_path else None
         self.inq: queue.Queue = queue.Queue()
@@ -198,6 +214,8 @@ class LiveProcessing:
             self.busy_s += done - t0
             if out.fits:
                 self.latencies.append(done - arrived)
+            for f in out.fits:
+                self.outq.put(("model", model_records(f)))
             for e in out.events:
                 if self.jsonl:
                     self.jsonl.write(e)
@@ -208,11 +226,16 @@ class LiveProcessing:
                 data = {k: v for k, v in e.items() if k not in ("t", "kind")}
                 self.outq.put(Event(e["t"], e["kind"], msg, "info", data))
 
-    def drain_events(self) -> list:
-        out = []
+    def drain(self) -> tuple[list, list]:
+        """(events, per-window model records) produced since the last call."""
+        events, models = [], []
         while not self.outq.empty():
-            out.append(self.outq.get_nowait())
-        return out
+            item = self.outq.get_nowait()
+            if isinstance(item, tuple) and item[0] == "model":
+                models += item[1]
+            else:
+                events.append(item)
+        return events, models
 
     def log_event(self, e) -> None:
         if self.jsonl:

@@ -13,6 +13,8 @@ Channels (JSON schema encoding, readable by Foxglove and PlotJuggler):
 - ``/rig/events`` (``foxglove.Log``): drops, CRC failures, disconnects,
   reconnects, regime changes; with our fields ``t`` and ``kind`` added.
 - ``/rig/status`` (``rig.Status``): counters and clock estimates once a second.
+- ``/rig/model`` (``rig.Model``): every rolling window's model per beam: equations,
+  coefficients, active set, integration NRMSE, identified natural frequency.
 
 The resolved config is stored as metadata ``config`` (YAML text) and as the
 attachment ``config.yaml``; the calibration as metadata ``calibration``.
@@ -62,8 +64,22 @@ LOG_SCHEMA = {
     },
 }
 STATUS_SCHEMA = {"type": "object", "title": "rig.Status", "additionalProperties": True}
+MODEL_SCHEMA = {
+    "type": "object",
+    "title": "rig.Model",
+    "properties": {
+        "t": {"type": "number", "description": "end of the window, seconds since the start"},
+        "beam": {"type": "integer"},
+        "equations": {"type": "array", "items": {"type": "string"}},
+        "integration_nrmse": {"type": "number"},
+        "natural_frequency_hz": {"type": "number"},
+        "stiffness_per_mass": {"type": "number", "description": "1/s^2"},
+        "changed": {"type": "boolean", "description": "active set differs from the previous window's"},
+    },
+}
 LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
-TOPICS = {"accel": "/rig/accel", "raw": "/rig/raw", "events": "/rig/events", "status": "/rig/status"}
+TOPICS = {"accel": "/rig/accel", "raw": "/rig/raw", "events": "/rig/events", "status": "/rig/status",
+          "model": "/rig/model"}
 
 
 class McapRecorder:
@@ -74,7 +90,8 @@ class McapRecorder:
         self._w = Writer(self._fh, chunk_size=4 * 1024 * 1024, compression=CompressionType.ZSTD)
         self._w.start(profile="", library="shaker-ident daq")
         ids = {}
-        for key, schema in (("accel", ACCEL_SCHEMA), ("events", LOG_SCHEMA), ("status", STATUS_SCHEMA)):
+        for key, schema in (("accel", ACCEL_SCHEMA), ("events", LOG_SCHEMA), ("status", STATUS_SCHEMA),
+                            ("model", MODEL_SCHEMA)):
             sid = self._w.register_schema(schema["title"], "jsonschema", json.dumps(schema).encode())
             ids[key] = self._w.register_channel(TOPICS[key], "json", sid)
         ids["raw"] = self._w.register_channel(TOPICS["raw"], "application/octet-stream", 0,
@@ -130,6 +147,12 @@ class McapRecorder:
         msg = {"timestamp": {"sec": ns // 10**9, "nsec": ns % 10**9}, "level": LEVELS.get(e.level, 2),
                "message": e.message, "name": "daq", "file": "", "line": 0, "t": e.t, "kind": e.kind, **e.data}
         self._add("events", ns, ns, json.dumps(msg).encode())
+
+    def write_model(self, record: dict) -> None:
+        """One rolling-window model of one beam (the identification's time series)."""
+        ns = time.time_ns()
+        clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in record.items()}
+        self._add("model", ns, ns, json.dumps(clean).encode())
 
     def write_status(self, status: dict) -> None:
         ns = time.time_ns()

@@ -5,11 +5,13 @@ Entities (all on the timeline ``time``, seconds since the start of the stream):
 - ``accel/raw/{base,tip1,tip2}`` and ``accel/filtered/{...}``: accelerations, high-rate
   scalars sent in columns (``rr.send_columns``), never one call per sample;
 - ``phase/tip1``: the filtered relative acceleration of tip 1, delay-embedded in 3D
-  (the last two seconds as a line strip), like the paper's phase portraits;
+  with the core's delay (first zero of the autocorrelation of the first two seconds;
+  the last two seconds as a line strip), like the paper's phase portraits;
 - ``model/beam{1,2}/coefficients``: the current identified coefficients (bar chart);
 - ``model/beam{1,2}/z`` and ``.../z_pred``: measured and predicted relative
   displacement over the last window (the identified model's prediction);
-- ``model/beam{1,2}/natural_frequency_hz``: the identified stiffness as a frequency;
+- ``model/beam{1,2}/natural_frequency_hz`` and ``.../integration_nrmse``: the
+  identified stiffness as a frequency and each window's integration error, over time;
 - ``regime``: the regime as a state timeline (``rr.StateChange``);
 - ``events``: regime changes, model changes, drops, reconnects (``rr.TextLog``).
 
@@ -28,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 CHANNELS = ("base", "tip1", "tip2")
-PHASE_DELAY_S = 1 / (4 * 12.3)  # a quarter period of the rig's excitation (the ACF's first zero)
+PHASE_DELAY_S = 1 / (4 * 12.3)  # fallback: a quarter period of the rig's excitation
 PHASE_SPAN_S = 2.0
 PHASE_EVERY_S = 0.2  # refresh the portrait five times per second of stream time
 VIEWER_MODES = ("auto", "spawn", "web", "save", "none")
@@ -64,7 +66,8 @@ def blueprint():
 ENTITIES = ("accel/raw/base", "accel/raw/tip1", "accel/raw/tip2", "accel/filtered/base", "accel/filtered/tip1",
             "accel/filtered/tip2", "phase/tip1", "model/beam1/coefficients", "model/beam2/coefficients",
             "model/beam1/z", "model/beam1/z_pred", "model/beam2/z", "model/beam2/z_pred",
-            "model/beam1/natural_frequency_hz", "model/beam2/natural_frequency_hz", "regime", "events")
+            "model/beam1/natural_frequency_hz", "model/beam2/natural_frequency_hz", "model/beam1/integration_nrmse",
+            "model/beam2/integration_nrmse", "regime", "events")
 
 
 def _has_display() -> bool:
@@ -138,6 +141,7 @@ class RerunViewer:
                 pre = f"model/beam{i + 1}"
                 self.rec.log(f"{pre}/coefficients", rr.BarChart(b.model.coefficients[:, 1]))
                 self.rec.log(f"{pre}/natural_frequency_hz", rr.Scalars(b.natural_frequency_hz))
+                self.rec.log(f"{pre}/integration_nrmse", rr.Scalars(b.error))
                 self._scalars(f"{pre}/z", f.t, f.measured[:, i, 0])
                 self._scalars(f"{pre}/z_pred", f.t, f.predicted[:, i, 0])
         for e in out.events:
@@ -152,7 +156,17 @@ class RerunViewer:
         self.rec.log("events", self.rr.TextLog(f"{e['kind']}: {text}", level=level))
 
     def _phase(self, t: np.ndarray, rel: np.ndarray) -> None:
-        d = max(1, int(round(PHASE_DELAY_S * self.fs_hz)))
+        if getattr(self, "_delay", None) is None:
+            self._first = np.concatenate([getattr(self, "_first", np.zeros(0)), rel])
+            if len(self._first) < int(PHASE_SPAN_S * self.fs_hz):
+                return
+            try:  # the core's choice: first zero of the autocorrelation
+                from ident.embedding import acf_delay
+
+                self._delay = acf_delay(self._first)
+            except ValueError:
+                self._delay = max(1, int(round(PHASE_DELAY_S * self.fs_hz)))
+        d = self._delay
         keep = int(PHASE_SPAN_S * self.fs_hz) + 2 * d
         self._rel = np.concatenate([self._rel, rel])[-keep:]
         self._rel_t = np.concatenate([self._rel_t, t])[-keep:]

@@ -41,6 +41,17 @@ class StepOutput:
     events: list[dict]
 
 
+def rolling_config(fs_hz: float, window_s: float = 4.0, hop_s: float = 1.0) -> RollingConfig:
+    """The rolling identification's window and hop in seconds, checked."""
+    if not (window_s > 0 and hop_s > 0):
+        raise ValueError(f"--window and --hop must be positive seconds, got {window_s} and {hop_s}")
+    if hop_s > window_s:
+        raise ValueError(f"--hop {hop_s} s is longer than --window {window_s} s; windows would skip data")
+    if window_s < 2.0:
+        raise ValueError(f"--window {window_s} s is too short: the integration to displacement needs at least 2 s")
+    return RollingConfig(fs_hz=fs_hz, window_s=window_s, hop_s=hop_s)
+
+
 class Pipeline:
     def __init__(self, cfg: PipelineConfig = PipelineConfig()):
         if cfg.regime.fs_hz != cfg.fs_hz or cfg.rolling.fs_hz != cfg.fs_hz:

@@ -55,6 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--rrd", type=Path, help="with --viewer save: the .rrd to write")
     pl.add_argument("--events", type=Path, help="write events as JSON lines here")
     pl.add_argument("--no-identify", action="store_true", help="filters and regimes only")
+    pl.add_argument("--window", type=float, default=4.0, help="rolling SINDy window [s] (default 4)")
+    pl.add_argument("--hop", type=float, default=1.0, help="rolling SINDy hop [s] (default 1)")
+    pl.add_argument("--models", type=Path, help="write each window's model (per beam) as JSON lines here")
     _csv_options(pl)
     pl.set_defaults(func=play_cmd)
 
@@ -78,6 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def play_cmd(args) -> int:
+    from daq.cli import model_records
     from daq.eventlog import JsonlEvents
     from daq.viewer import RerunViewer
 
@@ -88,6 +92,7 @@ def play_cmd(args) -> int:
     rrd = args.rrd or Path(args.file).with_suffix(".rrd")
     viewer = RerunViewer(args.viewer, rrd_path=rrd, fs_hz=samples.fs_hz)
     events = JsonlEvents(args.events) if args.events else None
+    models = JsonlEvents(args.models) if args.models else None
     counts: Counter = Counter()
     stopped = [False]
 
@@ -99,6 +104,10 @@ def play_cmd(args) -> int:
 
     def on_step(out):
         viewer.log_step(out)
+        if models:
+            for f in out.fits:
+                for m in model_records(f):
+                    models.write(m)
         for e in out.events:
             counts[e["kind"]] += 1
             if events:
@@ -108,11 +117,14 @@ def play_cmd(args) -> int:
 
     try:
         rep = play(samples, rate=None if args.max else args.rate, start_s=args.start, duration_s=args.duration,
-                   loop=args.loop, identify=not args.no_identify, on_step=on_step, stop=lambda: stopped[0])
+                   loop=args.loop, identify=not args.no_identify, on_step=on_step, stop=lambda: stopped[0],
+                   window_s=args.window, hop_s=args.hop)
     finally:
         viewer.close()
         if events:
             events.close()
+        if models:
+            models.close()
     speed = rep.stream_s / rep.wall_s if rep.wall_s > 0 else float("inf")
     print(f"played {rep.stream_s:.2f} s of data in {rep.wall_s:.2f} s ({speed:.1f} x real time); events: "
           + (", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "none")

@@ -25,6 +25,7 @@ class Recording:
     raw: bytes = b""
     events: list[dict] = field(default_factory=list)
     status: list[dict] = field(default_factory=list)
+    models: list[dict] = field(default_factory=list)
     config_yaml: str = ""
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
 
@@ -46,7 +47,7 @@ def read_recording(path: str | Path, raw: bool = True) -> Recording:
     except FileNotFoundError:
         raise ValueError(f"{path}: no such file") from None
     seq, t, vals, clip, lt, pt = [], [], [], [], [], []
-    raws, events, status = [], [], []
+    raws, events, status, models = [], [], [], []
     meta: dict[str, dict[str, str]] = {}
     with fh:
         try:
@@ -67,6 +68,8 @@ def read_recording(path: str | Path, raw: bool = True) -> Recording:
                     events.append(json.loads(message.data))
                 elif topic == TOPICS["status"]:
                     status.append(json.loads(message.data))
+                elif topic == TOPICS["model"]:
+                    models.append(json.loads(message.data))
             for m in reader.iter_metadata():
                 meta[m.name] = dict(m.metadata)
         except (McapError, ValueError, EOFError, KeyError) as exc:
@@ -74,4 +77,4 @@ def read_recording(path: str | Path, raw: bool = True) -> Recording:
                              f"if it was cut short, run: replay recover {path} -o FIXED.mcap") from None
     return Recording(path, np.array(seq, np.int64), np.array(t, float), np.array(vals, float).reshape(-1, 3),
                      np.array(clip, bool), np.array(lt, np.int64), np.array(pt, np.int64), b"".join(raws),
-                     events, status, meta.get("config", {}).get("yaml", ""), meta)
+                     events, status, models, meta.get("config", {}).get("yaml", ""), meta)

@@ -177,3 +177,8 @@ def test_live_record_writes_regime_events_to_mcap_and_jsonl(tmp_path):
     lines = [json.loads(x) for x in ev.read_text().splitlines()]
     assert any(e["kind"] == "regime" and e["regime"] == "localized-2" for e in lines)
     assert rerun_cli("rrd", "verify", str(out.with_suffix(".rrd"))).returncode == 0
+    # every rolling window's model per beam is kept as a time series in the recording
+    assert len(rec.models) >= 2 * 4 and {m["beam"] for m in rec.models} == {1, 2}
+    t = [m["t"] for m in rec.models if m["beam"] == 1]
+    assert np.allclose(np.diff(t), 1.0)  # hop 1 s
+    assert all("integration_nrmse" in m and m["equations"] for m in rec.models)
