@@ -15,7 +15,8 @@ data", in physical coordinates):
    fitted to d by least squares; nonlinear parameters (the gap, the side)
    are searched on a grid, not guessed.
 5. Every candidate extends the rig model (its parameters map onto the rig's
-   fields), is simulated over the test segment, and scored by its gain
+   fields; a contact's gap and stiffness are then refined by simulation error
+   on the training segment), is simulated over the test segment, and scored by its gain
    1 - NRMSE_extended / NRMSE_baseline. Candidates gaining more than
    ``gain_floor`` are findings, best first; none means "nothing found".
 
@@ -23,7 +24,12 @@ Catalogue implemented here: ``contact`` (gap [m], side both|positive|negative,
 stiffness_per_mass [1/s^2]), ``cubic_stiffness`` (coefficient_per_mass
 [1/(m^2 s^2)], positive hardens), ``coulomb_friction`` (force_per_mass
 [m/s^2]), ``quadratic_damping`` (coefficient_per_mass [1/m]),
-``linear_mismatch`` (stiffness_per_mass, damping_per_mass offsets).
+``linear_mismatch`` (stiffness_per_mass, damping_per_mass offsets), and the
+sensor effects, fitted by comparing the nominal simulation with the
+measurement on the training segment: ``sensor_gain`` (gain_error, 0.05 = reads
+5 % high), ``sensor_offset`` (offset_m_per_s2), ``clipping`` (range_m_per_s2,
+recognised by samples piled at a channel's extreme value).
+Not yet: ``quadratic_stiffness`` (the rig model has no such term).
 """
 
 from __future__ import annotations
@@ -36,7 +42,9 @@ from .filters import lowpass_zero_phase
 from .physical import edge_samples, integrate_band
 from .rig import FRICTION_V_EPS, Beam, RigParams, simulate_measured_base
 
-EFFECTS = ("contact", "cubic_stiffness", "coulomb_friction", "quadratic_damping", "linear_mismatch")
+EFFECTS = ("contact", "cubic_stiffness", "coulomb_friction", "quadratic_damping", "linear_mismatch", "sensor_gain",
+           "sensor_offset", "clipping")
+CLIP_SHARE = 0.002  # a channel is clipped when this share of its samples sits at its extreme value
 GAIN_FLOOR = 0.05
 
 
@@ -47,6 +55,7 @@ class Candidate:
     parameters: dict
     params: RigParams  # the extended rig
     fit_r2: float  # share of the residual force variance the terms explain (training)
+    output: tuple = ()  # sensor effects: (channel index 0/1, kind, value) applied to the simulated tips
     test_nrmse: float = np.nan
     gain: float = np.nan
 
@@ -162,16 +171,85 @@ def fit_candidates(p: RigParams, i: int, z: np.ndarray, v: np.ndarray, d: np.nda
     return out
 
 
-def _test_error(p: RigParams, base: np.ndarray, tips: np.ndarray, z: np.ndarray, v: np.ndarray, fs: float,
-                test: slice) -> float:
-    st = np.array([z[test.start, 0], z[test.start, 1], v[test.start, 0], v[test.start, 1]])
-    sim = simulate_measured_base(p, base[test], fs, state=st)
+def _simulated_tips(p: RigParams, base: np.ndarray, z: np.ndarray, v: np.ndarray, fs: float, seg: slice,
+                    output: tuple = ()) -> np.ndarray:
+    """Tip accelerations of the rig over ``seg`` from the measured state, sensor effects applied."""
+    st = np.array([z[seg.start, 0], z[seg.start, 1], v[seg.start, 0], v[seg.start, 1]])
+    sim = simulate_measured_base(p, base[seg], fs, state=st)
     pred = np.column_stack([sim.tip1, sim.tip2])
+    for ch, kind, value in output:
+        if kind == "gain":
+            pred[:, ch] *= 1.0 + value
+        elif kind == "offset":
+            pred[:, ch] += value
+        elif kind == "clip":
+            pred[:, ch] = np.clip(pred[:, ch], -value, value)
+    return pred
+
+
+def _test_error(p: RigParams, base: np.ndarray, tips: np.ndarray, z: np.ndarray, v: np.ndarray, fs: float,
+                test: slice, output: tuple = ()) -> float:
+    pred = _simulated_tips(p, base, z, v, fs, test, output)
     if not np.all(np.isfinite(pred)):
         return np.inf
     pred = lowpass_zero_phase(pred, fs, min(50.0, 0.45 * fs))
     meas = tips[test]
     return float(np.mean(np.sqrt(np.mean((pred - meas) ** 2, axis=0)) / meas.std(axis=0)))
+
+
+def refine_contact(c: Candidate, i: int, base, tips, z, v, fs: float, train: slice, seconds: float = 8.0,
+                   max_evals: int = 40) -> Candidate:
+    """Refine a contact's gap and stiffness by simulation error on (part of) the training segment.
+
+    The least-squares stiffness is low: displacement from integrated accelerations is smoothed
+    during millisecond contacts. Nelder-Mead on (gap, log stiffness) against the measured tips.
+    """
+    from scipy.optimize import minimize
+
+    seg = slice(train.start, min(train.stop, train.start + int(seconds * fs)))
+    name = "beam1" if i == 0 else "beam2"
+    beam = getattr(c.params, name)
+    m = beam.mass_kg
+    g0 = float(c.parameters["gap"])
+    k0 = max(float(c.parameters["stiffness_per_mass"]), 1.0)
+    side = c.parameters["side"]
+
+    def params_for(x):
+        g, k = g0 * x[0], k0 * np.exp(x[1])
+        return replace(c.params, **{name: replace(beam, gap_pos_m=g if side != "negative" else np.inf,
+                                                  gap_neg_m=g if side != "positive" else np.inf,
+                                                  stopper_stiffness_n_per_m=k * m)}), g, k
+
+    def err(x):
+        if not 0.5 < x[0] < 1.5 or abs(x[1]) > 6:
+            return 1e9
+        return _test_error(params_for(x)[0], base, tips, z, v, fs, seg)
+
+    res = minimize(err, np.array([1.0, 1.0]), method="Nelder-Mead",
+                   options={"maxfev": max_evals, "xatol": 1e-3, "fatol": 1e-4})
+    x = res.x if res.fun <= err(np.array([1.0, 0.0])) else np.array([1.0, 0.0])
+    p, g, k = params_for(x)
+    return replace(c, params=p, parameters={"gap": float(g), "side": side, "stiffness_per_mass": float(k)})
+
+
+def sensor_candidates(p: RigParams, base, tips, raw_tips, z, v, fs: float, train: slice) -> list[Candidate]:
+    """Output effects, from the nominal simulation against the measurement on the training segment:
+    gain error (least-squares scale), offset (mean difference), clipping (samples piled at the extreme)."""
+    pred = lowpass_zero_phase(_simulated_tips(p, base, z, v, fs, train), fs, min(50.0, 0.45 * fs))
+    out = []
+    for ch in range(2):
+        meas, sim = tips[train, ch], pred[:, ch]
+        resp = f"tip{ch + 1}"
+        g = float(sim @ meas / max(sim @ sim, 1e-300)) - 1.0
+        out.append(Candidate("sensor_gain", resp, {"gain_error": g}, p, 0.0, ((ch, "gain", g),)))
+        o = float(np.mean(meas - sim))
+        out.append(Candidate("sensor_offset", resp, {"offset_m_per_s2": o}, p, 0.0, ((ch, "offset", o),)))
+        x = raw_tips[:, ch]
+        top = float(np.max(np.abs(x)))
+        at_top = np.mean(np.abs(x) >= top * (1 - 1e-6))
+        if at_top >= CLIP_SHARE:
+            out.append(Candidate("clipping", resp, {"range_m_per_s2": top}, p, 0.0, ((ch, "clip", top),)))
+    return out
 
 
 def discover(values: np.ndarray, fs_hz: float, nominal: RigParams, *, train: slice | None = None,
@@ -198,15 +276,20 @@ def discover(values: np.ndarray, fs_hz: float, nominal: RigParams, *, train: sli
     for i in range(2):
         d = r[tr, i] - _beam_rhs(nominal, i, z[tr], v[tr], base_full[tr])
         resid[f"tip{i + 1}"] = float(np.sqrt(np.mean(d**2)))
-        cands += fit_candidates(nominal, i, z[tr], v[tr], d)
+        for c in fit_candidates(nominal, i, z[tr], v[tr], d):
+            if c.effect == "contact":
+                c = refine_contact(c, i, base, tips, z, v, fs_hz, tr)
+            cands.append(c)
+    cands += sensor_candidates(nominal, base, tips, values[:, 1:], z, v, fs_hz, tr)
     scored = []
     for c in cands:
-        err = _test_error(c.params, base, tips, z, v, fs_hz, te)
+        err = _test_error(c.params, base, tips, z, v, fs_hz, te, c.output)
         gain = 1.0 - err / base_err if np.isfinite(err) and base_err > 0 else -np.inf
         scored.append(replace(c, test_nrmse=err, gain=gain))
     scored.sort(key=lambda c: -c.gain)
     findings = []
     ext = nominal
+    ext_out: tuple = ()
     for resp in ("tip1", "tip2"):
         best = next((c for c in scored if c.response == resp), None)
         if best is not None and best.gain > gain_floor:
@@ -214,15 +297,17 @@ def discover(values: np.ndarray, fs_hz: float, nominal: RigParams, *, train: sli
             i = int(resp[-1]) - 1
             name = "beam1" if i == 0 else "beam2"
             ext = replace(ext, **{name: getattr(best.params, name)})
+            ext_out += best.output
     findings.sort(key=lambda c: -c.gain)
-    ext_err = _test_error(ext, base, tips, z, v, fs_hz, te) if findings else base_err
+    ext_err = _test_error(ext, base, tips, z, v, fs_hz, te, ext_out) if findings else base_err
     return Discovery(base_err, ext_err, 1.0 - ext_err / base_err if base_err > 0 else 0.0, findings, scored,
                      ext, nominal, tr, te, resid)
 
 
 # --- hidden-effect cases: the tests' and the benchmark's generator ---------------------------
 
-HIDDEN = ("none", "contact", "cubic_stiffness", "coulomb_friction", "quadratic_damping")
+HIDDEN = ("none", "contact", "cubic_stiffness", "coulomb_friction", "quadratic_damping", "sensor_gain",
+          "sensor_offset", "clipping")
 
 
 @dataclass(frozen=True)
@@ -296,4 +381,17 @@ def hidden_case(seed: int, effect: str | None = None, duration_s: float = 40.0, 
     _, o = simulate_rig(RigConfig(rig=truth_params, excitation=exc), duration_s, fs_hz)
     vals = np.column_stack([o.base, o.tip1, o.tip2])
     vals = vals + rng.standard_normal(vals.shape) * vals.std(axis=0) * 10 ** (-snr_db / 20)
+    ch = vals[:, beam]
+    if effect == "sensor_gain":
+        g = float(rng.uniform(0.05, 0.2) * rng.choice([-1, 1]))
+        truth = {"gain_error": g}
+        vals[:, beam] = ch * (1 + g)
+    elif effect == "sensor_offset":
+        off = float(rng.uniform(0.2, 0.8) * rng.choice([-1, 1]) * ch.std())
+        truth = {"offset_m_per_s2": off}
+        vals[:, beam] = ch + off
+    elif effect == "clipping":
+        rng_m = float(rng.uniform(0.6, 0.85) * np.max(np.abs(ch)))  # the accelerometer's range
+        truth = {"range_m_per_s2": rng_m}
+        vals[:, beam] = np.clip(ch, -rng_m, rng_m)
     return HiddenCase(effect, beam, truth, nom, vals, fs_hz, kind)

@@ -89,6 +89,8 @@ def run_discovery(n_cases: int) -> int:
         conf[(c.effect, named)] += 1
         if ok and top is not None:
             key = "gap" if c.effect == "contact" else next(iter(c.truth))
+            if key not in top.parameters:
+                key = next(iter(top.parameters))
             perr.setdefault(c.effect, []).append(abs(top.parameters[key] / c.truth[key] - 1))
             gains.setdefault(c.effect, []).append(top.gain)
         print(f"case {seed:3d}: {c.effect:18s} beam {c.beam} ({c.excitation:5s}) -> {named:18s}"

@@ -19,9 +19,14 @@ import numpy as np
 def add_parser(sub) -> None:
     p = sub.add_parser("discover", help="find what the rig model misses in measured data, name it, extend it")
     p.add_argument("data")
-    p.add_argument("--model", type=Path, required=True, help="the rig config (YAML) whose model is the baseline")
-    p.add_argument("--excitation", default="base", help="CSV: column of the base acceleration (default base)")
-    p.add_argument("--response", action="append", help="CSV: tip acceleration columns (default tip1, tip2)")
+    base = p.add_mutually_exclusive_group(required=True)
+    base.add_argument("--model", type=Path, help="the rig config (YAML) whose model is the baseline")
+    base.add_argument("--baseline", choices=("linear",), help="linear: a linear model fitted on the training segment")
+    p.add_argument("--excitation", default="base",
+                   help="column[:KIND] of the excitation, KIND base_acceleration (default) or force")
+    p.add_argument("--response", action="append",
+                   help="column[:KIND] of a response (repeat), KIND acceleration (default), velocity or displacement; "
+                        "default tip1 and tip2")
     p.add_argument("--time", dest="time_col", help="CSV: time column [s]")
     p.add_argument("--fs", type=float, dest="fs_hz", help="CSV: sampling rate [Hz]")
     p.add_argument("--train", help="training samples START:STOP (default: the first 60 %%)")
@@ -107,7 +112,90 @@ def result_json(d) -> dict:
     }
 
 
+def _split_kind(spec: str, default: str) -> tuple[str, str]:
+    col, _, kind = spec.partition(":")
+    return col, kind or default
+
+
+def run_linear(args) -> int:
+    """--baseline linear: any CSV (or recording) with an excitation and responses of given kinds."""
+    import csv
+
+    from ..linear_discovery import KINDS_EXCITATION, KINDS_RESPONSE, discover_linear
+
+    exc_col, exc_kind = _split_kind(args.excitation, "base_acceleration")
+    if exc_kind not in KINDS_EXCITATION:
+        raise ValueError(f"excitation kind {exc_kind!r} is not one of {', '.join(KINDS_EXCITATION)}")
+    specs = [_split_kind(r, "acceleration") for r in (args.response or ["tip1", "tip2"])]
+    for col, kind in specs:
+        if kind not in KINDS_RESPONSE:
+            raise ValueError(f"response kind {kind!r} of {col!r} is not one of {', '.join(KINDS_RESPONSE)}")
+    path = Path(args.data)
+    if path.suffix.lower() == ".csv":
+        if (args.time_col is None) == (args.fs_hz is None):
+            raise ValueError("CSV input needs exactly one of --time COL or --fs HZ")
+        try:
+            with open(path, newline="") as fh:
+                rows = list(csv.reader(fh))
+        except FileNotFoundError:
+            raise ValueError(f"{path}: no such file") from None
+        header = [h.strip() for h in rows[0]] if rows else []
+        cols = [exc_col] + [c for c, _ in specs] + ([args.time_col] if args.time_col else [])
+        for c in cols:
+            if c not in header:
+                raise ValueError(f"{path}: no column {c!r}; columns are: {', '.join(header)}")
+        idx = [header.index(c) for c in cols]
+        data = []
+        for r, row in enumerate(rows[1:], start=2):
+            try:
+                data.append([float(row[i]) for i in idx])
+            except (ValueError, IndexError):
+                raise ValueError(f"{path}: line {r} has a missing or non-numeric value") from None
+        data = np.array(data)
+        fs = args.fs_hz or 1.0 / float(np.median(np.diff(data[:, -1])))
+        u, Y = data[:, 0], data[:, 1:1 + len(specs)]
+    else:
+        from replay.sources import open_samples
+
+        s = open_samples(path)
+        roles = {"base": 0, "tip1": 1, "tip2": 2}
+        for c in [exc_col] + [c for c, _ in specs]:
+            if c not in roles:
+                raise ValueError(f"a recording has the channels base, tip1, tip2; not {c!r}")
+        u, Y, fs = s.values[:, roles[exc_col]], s.values[:, [roles[c] for c, _ in specs]], s.fs_hz
+    n = len(u)
+    train, test = parse_slice(args.train, n, "train"), parse_slice(args.test, n, "test")
+    d = discover_linear(u, Y, [c for c, _ in specs], [k for _, k in specs], exc_kind, fs, train=train, test=test)
+    js = {"baseline": {"test_nrmse": d.baseline_test_nrmse}, "extended": {
+        "test_nrmse": d.extended_test_nrmse,
+        "equations": [f"{f['response']}: {f['effect']} ({', '.join(f'{k} = {v}' for k, v in f['parameters'].items())})"
+                      for f in d.findings]},
+        "gain": d.gain, "findings": d.findings, "candidates": d.candidates,
+        "split": {"train": [d.train.start, d.train.stop], "test": [d.test.start, d.test.stop]},
+        "residual_rms": d.residual_rms}
+    print(f"linear baseline test NRMSE {d.baseline_test_nrmse:.4f}"
+          + (" (its simulation diverges: capped at 1, the error of predicting nothing)"
+             if d.baseline_test_nrmse >= 1.0 else ""))
+    print("findings: " + ("; ".join(js["extended"]["equations"]) or "nothing found; residual force RMS "
+                          + ", ".join(f"{k} {v:.3g}" for k, v in d.residual_rms.items())))
+    print(f"extended test NRMSE {d.extended_test_nrmse:.4f}, gain {d.gain:.3f}")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(js, indent=2, default=_clean))
+    if args.report:
+        args.report.mkdir(parents=True, exist_ok=True)
+        (args.report / "result.json").write_text(json.dumps(js, indent=2, default=_clean))
+        rows = [f"| {c['effect']} | {c['response']} | {c['gain']:.3f} |" for c in d.candidates]
+        (args.report / "README.md").write_text("\n".join([
+            "# Discovery (linear baseline)", "",
+            f"Linear baseline test NRMSE {d.baseline_test_nrmse:.4f}, extended {d.extended_test_nrmse:.4f}, "
+            f"gain {d.gain:.3f}.", "", "| effect | response | gain |", "|---|---|---|", *rows, ""]))
+    return 0
+
+
 def run(args) -> int:
+    if args.baseline == "linear":
+        return run_linear(args)
     from ..discovery import discover
 
     s = _load(args)
