@@ -26,13 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", type=Path, help="MCAP file to write (default rig-YYYYmmdd-HHMMSS.mcap)")
     r.add_argument("--duration", type=float, help="stop after this many seconds of samples")
     r.add_argument("--quiet", action="store_true", help="no live status line")
-    r.add_argument("--viewer", choices=("auto", "spawn", "web", "save", "none"), default="auto",
-                   help="rerun viewer: spawn, web, save (an .rrd next to the recording), none; auto (default): "
-                        "spawn or web in an interactive terminal, none otherwise")
-    r.add_argument("--events", type=Path, help="also write events as JSON lines here")
-    r.add_argument("--no-identify", action="store_true", help="record only: no filters, regimes, SINDy")
-    r.add_argument("--window", type=float, default=4.0, help="rolling SINDy window [s] (default 4)")
-    r.add_argument("--hop", type=float, default=1.0, help="rolling SINDy hop [s] (default 1)")
+    add_live_options(r, "the recording")
     r.set_defaults(func=record)
     s = sub.add_parser("sim", help="serve the simulated rig on a pty and print its path")
     s.add_argument("--config", type=Path, help="rig and daq config (YAML)")
@@ -44,6 +38,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench.add_parser(sub)
     return p
+
+
+def add_live_options(p, beside: str) -> None:
+    """The live pipeline's options, shared by ``daq record`` and ``replay``."""
+    p.add_argument("--viewer", choices=("auto", "spawn", "web", "save", "none"), default="auto",
+                   help=f"rerun viewer: spawn, web, save (an .rrd next to {beside}), none; auto (default): "
+                        "spawn or web in an interactive terminal, none otherwise")
+    p.add_argument("--events", type=Path, help="write events as JSON lines here")
+    p.add_argument("--no-identify", action="store_true", help="no rolling SINDy (filters and regimes only)")
+    p.add_argument("--window", type=float, default=4.0, help="rolling SINDy window [s] (default 4)")
+    p.add_argument("--hop", type=float, default=1.0, help="rolling SINDy hop [s] (default 1)")
 
 
 def _check_duration(d: float | None) -> None:

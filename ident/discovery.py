@@ -116,6 +116,31 @@ def _with_beam(p: RigParams, i: int, **changes) -> RigParams:
     return replace(p, **{name: replace(getattr(p, name), **changes)})
 
 
+def contact_shape(z: np.ndarray, gap: float, side: str) -> np.ndarray:
+    """Penetration beyond the stoppers: z - gap above +gap, z + gap below -gap (per side)."""
+    h = np.zeros_like(z)
+    if side in ("both", "positive"):
+        h += np.maximum(z - gap, 0.0)
+    if side in ("both", "negative"):
+        h += np.minimum(z + gap, 0.0)
+    return h
+
+
+def best_contact(z: np.ndarray, d: np.ndarray, n_grid: int = 84) -> tuple[str, float, float, float] | None:
+    """Search side and gap (a grid over 15-98 % of the largest |z|), stiffness by least squares:
+    d ~ -k h(z); returns (side, gap, k per mass, r2) of the best fit with k > 0, or None."""
+    best = None
+    for side in ("both", "positive", "negative"):
+        for g in np.linspace(0.15, 0.98, n_grid) * float(np.max(np.abs(z))):
+            h = contact_shape(z, g, side)
+            if not np.any(h):
+                continue
+            a, r2 = _lsq1(-h, d)
+            if a > 0 and (best is None or r2 > best[3]):
+                best = (side, float(g), a, r2)
+    return best
+
+
 def fit_candidates(p: RigParams, i: int, z: np.ndarray, v: np.ndarray, d: np.ndarray) -> list[Candidate]:
     """Least-squares fit of every cause's terms to the residual force d of beam i."""
     b: Beam = p.beam1 if i == 0 else p.beam2
@@ -123,23 +148,9 @@ def fit_candidates(p: RigParams, i: int, z: np.ndarray, v: np.ndarray, d: np.nda
     zi, vi = z[:, i], v[:, i]
     resp = f"tip{i + 1}"
     out = []
-    # contact: search side and gap; the stiffness by least squares
-    zmax = float(np.max(np.abs(zi)))
-    best = None
-    for side in ("both", "positive", "negative"):
-        for g in np.linspace(0.15, 0.98, 84) * zmax:
-            h = np.zeros_like(zi)
-            if side in ("both", "positive"):
-                h += np.maximum(zi - g, 0.0)
-            if side in ("both", "negative"):
-                h += np.minimum(zi + g, 0.0)
-            if not np.any(h):
-                continue
-            a, r2 = _lsq1(-h, d)
-            if a > 0 and (best is None or r2 > best[0]):
-                best = (r2, side, g, a)
-    if best is not None:
-        r2, side, g, a = best
+    found = best_contact(zi, d)
+    if found is not None:
+        side, g, a, r2 = found
         gp = g if side in ("both", "positive") else np.inf
         gn = g if side in ("both", "negative") else np.inf
         out.append(Candidate("contact", resp, {"gap": float(g), "side": side, "stiffness_per_mass": float(a)},
@@ -252,6 +263,17 @@ def sensor_candidates(p: RigParams, base, tips, raw_tips, z, v, fs: float, train
     return out
 
 
+def split(n: int, edge: int, train: slice | None, test: slice | None) -> tuple[slice, slice]:
+    """Training and held-out segments; default the first 60 % and the last 40 %, integration edges cut."""
+    if n < 10 * edge:
+        raise ValueError(f"{n} samples are too few for discovery; need at least {10 * edge}")
+    cut = int(0.6 * n)
+    train = train or slice(edge, cut)
+    test = test or slice(cut, n - edge)
+    return (slice(max(train.start or 0, edge), min(train.stop or n, n - edge)),
+            slice(max(test.start or 0, edge), min(test.stop or n, n - edge)))
+
+
 def discover(values: np.ndarray, fs_hz: float, nominal: RigParams, *, train: slice | None = None,
              test: slice | None = None, gain_floor: float = GAIN_FLOOR) -> Discovery:
     """Find what the nominal rig model misses in measured (N, 3) accelerations base, tip1, tip2."""
@@ -260,17 +282,8 @@ def discover(values: np.ndarray, fs_hz: float, nominal: RigParams, *, train: sli
         raise ValueError(f"expected accelerations base, tip1, tip2 as (N, 3), got {values.shape}")
     if not np.all(np.isfinite(values)):
         raise ValueError("data contain NaN or inf: repair or remove those samples first")
-    n = len(values)
-    e = edge_samples(fs_hz, 2.0)
-    if n < 10 * e:
-        raise ValueError(f"{n} samples are too few for discovery; need at least {10 * e}")
-    if train is None or test is None:
-        cut = int(0.6 * n)
-        train = train or slice(e, cut)
-        test = test or slice(cut, n - e)
+    tr, te = split(len(values), edge_samples(fs_hz, 2.0), train, test)
     base, tips, z, v, r, base_full = coordinates(values, fs_hz)
-    tr = slice(max(train.start or 0, e), min(train.stop or n, n - e))
-    te = slice(max(test.start or 0, e), min(test.stop or n, n - e))
     base_err = _test_error(nominal, base, tips, z, v, fs_hz, te)
     cands, resid = [], {}
     for i in range(2):

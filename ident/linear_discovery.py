@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 
 from .derivatives import differentiate
+from .discovery import best_contact, split
 from .filters import lowpass_zero_phase
 from .physical import edge_samples, integrate_band
 
@@ -225,23 +226,12 @@ def candidate_terms(j: int, z: np.ndarray, v: np.ndarray, d: np.ndarray) -> list
     a, r2 = _lsq(vj * np.abs(vj), d)
     if a < 0:
         out.append((Term("quadratic_damping", j, T_QDAMP, a, parameters={"coefficient_per_mass": -a}), r2))
-    zmax = float(np.max(np.abs(zj)))
-    best = None
-    for side, code in (("both", 0), ("positive", 1), ("negative", 2)):
-        for g in np.linspace(0.15, 0.98, 60) * zmax:
-            h = np.zeros_like(zj)
-            if code != 2:
-                h += np.maximum(zj - g, 0.0)
-            if code != 1:
-                h += np.minimum(zj + g, 0.0)
-            if not h.any():
-                continue
-            a, r2 = _lsq(h, d)
-            if a < 0 and (best is None or r2 > best[1]):
-                best = (Term("contact", j, T_CONTACT, a, g, code, {"gap": float(g), "side": side,
-                                                                  "stiffness_per_mass": -a}), r2)
-    if best is not None:
-        out.append(best)
+    found = best_contact(zj, d, 60)
+    if found is not None:
+        side, g, k, r2 = found
+        code = {"both": 0, "positive": 1, "negative": 2}[side]
+        out.append((Term("contact", j, T_CONTACT, -k, g, code, {"gap": g, "side": side, "stiffness_per_mass": k}),
+                    r2))
     return out
 
 
@@ -264,16 +254,7 @@ def discover_linear(u: np.ndarray, Y: np.ndarray, names: list[str], kinds: list[
     Y = np.asarray(Y, float).reshape(len(u), -1)
     if not (np.all(np.isfinite(u)) and np.all(np.isfinite(Y))):
         raise ValueError("data contain NaN or inf: repair or remove those samples first")
-    n = len(u)
-    e = edge_samples(fs, f_lo)
-    if n < 10 * e:
-        raise ValueError(f"{n} samples are too few; need at least {10 * e}")
-    if train is None or test is None:
-        cut = int(0.6 * n)
-        train = train or slice(e, cut)
-        test = test or slice(cut, n - e)
-    train = slice(max(train.start, e), min(train.stop, n - e))
-    test = slice(max(test.start, e), min(test.stop, n - e))
+    train, test = split(len(u), edge_samples(fs, f_lo), train, test)
     F, z, v, a = coordinates(u, Y, kinds, excitation, fs, f_lo)
     m = fit_linear(z, v, a, F, train)
     bound = 50.0 * float(np.max(np.abs(z))) + 1e-12

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from daq.cli import add_live_options
 from ident.cli import OneLineParser, run_guarded
 
 VERBS = ("info", "export", "import", "recover", "play")
@@ -49,14 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--start", type=float, default=0.0, help="start this many seconds into the data")
     pl.add_argument("--duration", type=float, help="play this many seconds")
     pl.add_argument("--loop", action="store_true", help="start again at the end, until Ctrl-C")
-    pl.add_argument("--viewer", choices=("auto", "spawn", "web", "save", "none"), default="auto",
-                    help="rerun viewer: spawn, web, save (an .rrd next to the input), none; auto (default): "
-                         "spawn or web in an interactive terminal, none otherwise")
+    add_live_options(pl, "the input")
     pl.add_argument("--rrd", type=Path, help="with --viewer save: the .rrd to write")
-    pl.add_argument("--events", type=Path, help="write events as JSON lines here")
-    pl.add_argument("--no-identify", action="store_true", help="filters and regimes only")
-    pl.add_argument("--window", type=float, default=4.0, help="rolling SINDy window [s] (default 4)")
-    pl.add_argument("--hop", type=float, default=1.0, help="rolling SINDy hop [s] (default 1)")
     pl.add_argument("--models", type=Path, help="write each window's model (per beam) as JSON lines here")
     _csv_options(pl)
     pl.set_defaults(func=play_cmd)

@@ -46,9 +46,13 @@ class Samples:
             yield self.t[k:e], self.values[k:e]
 
 
-def read_csv(path: str | Path, *, time_col: str | None = None, fs_hz: float | None = None,
-             base: str = "base", tip1: str = "tip1", tip2: str = "tip2") -> Samples:
-    """A CSV with a header row; times from ``time_col`` (seconds) or a sampling rate ``fs_hz``."""
+def read_csv_columns(path: str | Path, columns: list[str], time_col: str | None = None,
+                     fs_hz: float | None = None) -> tuple[np.ndarray, float]:
+    """The named columns of a CSV with a header row as (n, len(columns)) floats, and the sampling rate.
+
+    Times from ``time_col`` (seconds, uniform within 1 %) or the rate ``fs_hz``; every error names the
+    file and the line or column.
+    """
     path = Path(path)
     if (time_col is None) == (fs_hz is None):
         raise ValueError("CSV input needs exactly one of --time COL or --fs HZ")
@@ -62,7 +66,7 @@ def read_csv(path: str | Path, *, time_col: str | None = None, fs_hz: float | No
     if not rows:
         raise ValueError(f"{path}: empty file; expected a header row and data")
     header = [h.strip() for h in rows[0]]
-    wanted = [c for c in (time_col, base, tip1, tip2) if c is not None]
+    wanted = [c for c in ([time_col] if time_col else []) + list(columns)]
     missing = [c for c in wanted if c not in header]
     if missing:
         raise ValueError(f"{path}: no column {missing[0]!r}; columns are: {', '.join(header)}")
@@ -79,25 +83,25 @@ def read_csv(path: str | Path, *, time_col: str | None = None, fs_hz: float | No
     bad = ~np.isfinite(data).all(axis=1)
     if bad.any():
         raise ValueError(f"{path}: line {int(np.argmax(bad)) + 2} holds NaN or inf; repair or remove it")
-    if time_col is not None:
-        t = data[:, 0] - data[0, 0]
-        dt = np.diff(t)
-        if np.any(dt <= 0):
-            raise ValueError(f"{path}: column {time_col!r} is not strictly increasing (line "
-                             f"{int(np.argmax(dt <= 0)) + 3})")
-        med = float(np.median(dt))
-        if np.max(np.abs(dt - med)) > 0.01 * med:
-            raise ValueError(f"{path}: column {time_col!r} is not uniformly sampled (steps from "
-                             f"{dt.min():.3g} to {dt.max():.3g} s); resample first or give --fs")
-        fs = 1.0 / med
-        vals = data[:, 1:]
-    else:
+    if time_col is None:
         if not fs_hz > 0:
             raise ValueError(f"--fs must be positive, got {fs_hz}")
-        fs = float(fs_hz)
-        t = np.arange(len(data)) / fs
-        vals = data
-    return Samples(t, vals, fs, None, str(path))
+        return data, float(fs_hz)
+    dt = np.diff(data[:, 0])
+    if np.any(dt <= 0):
+        raise ValueError(f"{path}: column {time_col!r} is not strictly increasing (line {int(np.argmax(dt <= 0)) + 3})")
+    med = float(np.median(dt))
+    if np.max(np.abs(dt - med)) > 0.01 * med:
+        raise ValueError(f"{path}: column {time_col!r} is not uniformly sampled (steps from "
+                         f"{dt.min():.3g} to {dt.max():.3g} s); resample first or give --fs")
+    return data[:, 1:], 1.0 / med
+
+
+def read_csv(path: str | Path, *, time_col: str | None = None, fs_hz: float | None = None,
+             base: str = "base", tip1: str = "tip1", tip2: str = "tip2") -> Samples:
+    """A CSV with a header row; times from ``time_col`` (seconds) or a sampling rate ``fs_hz``."""
+    vals, fs = read_csv_columns(path, [base, tip1, tip2], time_col, fs_hz)
+    return Samples(np.arange(len(vals)) / fs, vals, fs, None, str(path))
 
 
 def read_mcap(path: str | Path) -> Samples:

@@ -119,8 +119,6 @@ def _split_kind(spec: str, default: str) -> tuple[str, str]:
 
 def run_linear(args) -> int:
     """--baseline linear: any CSV (or recording) with an excitation and responses of given kinds."""
-    import csv
-
     from ..linear_discovery import KINDS_EXCITATION, KINDS_RESPONSE, discover_linear
 
     exc_col, exc_kind = _split_kind(args.excitation, "base_acceleration")
@@ -132,28 +130,10 @@ def run_linear(args) -> int:
             raise ValueError(f"response kind {kind!r} of {col!r} is not one of {', '.join(KINDS_RESPONSE)}")
     path = Path(args.data)
     if path.suffix.lower() == ".csv":
-        if (args.time_col is None) == (args.fs_hz is None):
-            raise ValueError("CSV input needs exactly one of --time COL or --fs HZ")
-        try:
-            with open(path, newline="") as fh:
-                rows = list(csv.reader(fh))
-        except FileNotFoundError:
-            raise ValueError(f"{path}: no such file") from None
-        header = [h.strip() for h in rows[0]] if rows else []
-        cols = [exc_col] + [c for c, _ in specs] + ([args.time_col] if args.time_col else [])
-        for c in cols:
-            if c not in header:
-                raise ValueError(f"{path}: no column {c!r}; columns are: {', '.join(header)}")
-        idx = [header.index(c) for c in cols]
-        data = []
-        for r, row in enumerate(rows[1:], start=2):
-            try:
-                data.append([float(row[i]) for i in idx])
-            except (ValueError, IndexError):
-                raise ValueError(f"{path}: line {r} has a missing or non-numeric value") from None
-        data = np.array(data)
-        fs = args.fs_hz or 1.0 / float(np.median(np.diff(data[:, -1])))
-        u, Y = data[:, 0], data[:, 1:1 + len(specs)]
+        from replay.sources import read_csv_columns
+
+        data, fs = read_csv_columns(path, [exc_col] + [c for c, _ in specs], args.time_col, args.fs_hz)
+        u, Y = data[:, 0], data[:, 1:]
     else:
         from replay.sources import open_samples
 
