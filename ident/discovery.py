@@ -69,6 +69,7 @@ class Discovery:
     candidates: list[Candidate]  # all, ranked by gain
     extended: RigParams
     nominal: RigParams
+    extended_output: tuple  # sensor effects of the extended model (applied to its simulated tips)
     train: slice
     test: slice
     residual_rms: dict[str, float] = field(default_factory=dict)  # per response, m/s^2, training
@@ -180,6 +181,13 @@ def fit_candidates(p: RigParams, i: int, z: np.ndarray, v: np.ndarray, d: np.nda
                                                        "damping_per_mass": float(coef[1])},
                              _with_beam(p, i, natural_frequency_hz=fn, damping_ratio=zeta), r2))
     return out
+
+
+def simulated_tips(p: RigParams, values: np.ndarray, fs: float, seg: slice, output: tuple = ()):
+    """(measured tips, simulated tips) below 50 Hz over ``seg``, the rig driven by the measured base."""
+    base, tips, z, v, _, _ = coordinates(values, fs)
+    pred = lowpass_zero_phase(_simulated_tips(p, base, z, v, fs, seg, output), fs, min(50.0, 0.45 * fs))
+    return tips[seg], pred
 
 
 def _simulated_tips(p: RigParams, base: np.ndarray, z: np.ndarray, v: np.ndarray, fs: float, seg: slice,
@@ -314,7 +322,7 @@ def discover(values: np.ndarray, fs_hz: float, nominal: RigParams, *, train: sli
     findings.sort(key=lambda c: -c.gain)
     ext_err = _test_error(ext, base, tips, z, v, fs_hz, te, ext_out) if findings else base_err
     return Discovery(base_err, ext_err, 1.0 - ext_err / base_err if base_err > 0 else 0.0, findings, scored,
-                     ext, nominal, tr, te, resid)
+                     ext, nominal, ext_out, tr, te, resid)
 
 
 # --- hidden-effect cases: the tests' and the benchmark's generator ---------------------------

@@ -83,7 +83,8 @@ def test_discover_command_on_a_recording(tmp_path):
     assert js["findings"][0]["parameters"]["coefficient_per_mass"] == pytest.approx(3.0e6 / 0.04, rel=0.1)
     assert js["gain"] == pytest.approx(1 - js["extended"]["test_nrmse"] / js["baseline"]["test_nrmse"])
     assert js["gain"] > 0.5
-    assert (tmp_path / "rep" / "residual_portraits.png").exists()
+    for fig in ("residual_portraits.png", "baseline_extended_measured.png", "ranking.png"):
+        assert (tmp_path / "rep" / fig).read_bytes()[:4] == b"\x89PNG", fig
 
 
 @pytest.mark.parametrize("args,match", [

@@ -210,9 +210,45 @@ def _report(folder: Path, d, js: dict, s) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..discovery import _beam_rhs, coordinates
+    from scipy.signal import welch
+
+    from ..discovery import _beam_rhs, coordinates, simulated_tips
 
     folder.mkdir(parents=True, exist_ok=True)
+    fs = s.fs_hz
+    meas, base_sim = simulated_tips(d.nominal, s.values, fs, d.test)
+    _, ext_sim = simulated_tips(d.extended, s.values, fs, d.test, d.extended_output)
+    t = (np.arange(len(meas)) + d.test.start) / fs
+    show = slice(0, min(len(t), int(3 * fs)))
+    fig, ax = plt.subplots(2, 2, figsize=(12, 6.5), sharex="col")
+    for i in range(2):
+        ax[i, 0].plot(t[show], meas[show, i], "k", lw=1.2, label="measured")
+        ax[i, 0].plot(t[show], base_sim[show, i], "C0--", lw=1, label="baseline")
+        ax[i, 0].plot(t[show], ext_sim[show, i], "C3:", lw=1.5, label="extended")
+        ax[i, 0].set(ylabel=f"tip {i + 1} [m/s^2]")
+        f, p_res = welch(meas[:, i] - base_sim[:, i], fs, nperseg=min(4096, len(meas)))
+        f, p_meas = welch(meas[:, i], fs, nperseg=min(4096, len(meas)))
+        _, p_ext = welch(meas[:, i] - ext_sim[:, i], fs, nperseg=min(4096, len(meas)))
+        ax[i, 1].semilogy(f, p_meas, "k", lw=1, label="measured")
+        ax[i, 1].semilogy(f, p_res, "C0", lw=1, label="residual of the baseline")
+        ax[i, 1].semilogy(f, p_ext, "C3", lw=1, label="residual of the extended model")
+        ax[i, 1].set(xlim=(0, 60), ylim=(float(np.max(p_meas)) * 1e-8, float(np.max(p_meas)) * 10), ylabel="PSD")
+    ax[0, 0].legend(fontsize=8)
+    ax[0, 1].legend(fontsize=8)
+    ax[1, 0].set(xlabel="t [s] (held-out segment)")
+    ax[1, 1].set(xlabel="frequency [Hz] (harmonics the baseline cannot make stand out)")
+    fig.tight_layout()
+    fig.savefig(folder / "baseline_extended_measured.png", dpi=90)
+    plt.close(fig)
+    ranked = [c for c in js["candidates"] if c["gain"] is not None][:12]
+    fig, ax = plt.subplots(figsize=(8, 0.35 * len(ranked) + 1.2))
+    ax.barh([f"{c['effect']} ({c['response']})" for c in ranked][::-1], [c["gain"] for c in ranked][::-1],
+            color=["C3" if c["gain"] > 0.05 else "C7" for c in ranked][::-1])
+    ax.axvline(0.05, color="k", lw=0.8, ls="--")
+    ax.set(xlabel="gain on the held-out segment (1 - NRMSE extended / baseline)", title="candidate causes")
+    fig.tight_layout()
+    fig.savefig(folder / "ranking.png", dpi=90)
+    plt.close(fig)
     base, tips, z, v, r, base_full = coordinates(s.values, s.fs_hz)
     tr = d.train
     fig, ax = plt.subplots(2, 2, figsize=(11, 7))
@@ -238,6 +274,11 @@ def _report(folder: Path, d, js: dict, s) -> None:
           "(drift removed); scores on accelerations below 50 Hz over the held-out segment.", "",
           "## Candidates, ranked by gain on the held-out segment", "",
           "| effect | response | gain | parameters |", "|---|---|---|---|", *rows, "",
+          "![ranking](ranking.png)", "",
+          "## Baseline, extended model and measurement on the held-out segment", "",
+          "![baseline, extended, measured](baseline_extended_measured.png)", "",
+          "## Residual force against the states (training segment)", "",
+          "A dead zone (contact), a cubic, a step at zero velocity (friction) look different here.", "",
           "![residual portraits](residual_portraits.png)", ""]
     (folder / "README.md").write_text("\n".join(md))
     (folder / "result.json").write_text(json.dumps(js, indent=2))
