@@ -19,8 +19,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import serial
 
-from ident.sensors import CHANNELS
-
 from .config import Config
 from .protocol import FLAG_CLIPPED, Decoder
 from .transport import register_url_handler
@@ -102,7 +100,6 @@ class Acquisition:
         self.samples = 0
         self.reconnects = 0
         self._t0 = time.monotonic()
-        self._t_wrap = 0  # device-time unwrapping (uint64 never wraps in practice; kept for resets)
         scales, offsets = config.scales()
         self._scale = np.array(scales)
         self._offset = np.array(offsets)
@@ -230,5 +227,3 @@ class Acquisition:
             "clock_offset_s": est[0] if est else None, "clock_drift_ppm": est[1] if est else None,
         }
 
-
-__all__ = ["Acquisition", "ClockEstimator", "Event", "SampleBlock", "CHANNELS"]

@@ -86,6 +86,10 @@ class RerunViewer:
         self.url = None
         self._rel = np.zeros((0,))
         self._rel_t = np.zeros((0,))
+        self._first = np.zeros((0,))  # the first seconds, for the core's choice of delay
+        self._delay: int | None = None
+        self._phase_t = -np.inf
+        self._regime_started = False
         if mode == "none":
             self.rec = None
             return
@@ -126,12 +130,10 @@ class RerunViewer:
             self._scalars(f"accel/raw/{ch}", out.t, out.raw[:, j])
             self._scalars(f"accel/filtered/{ch}", out.t, out.filtered[:, j])
         self._phase(out.t, out.relative[:, 0])
-        for w in out.windows:
-            self.rec.set_time("time", duration=w.t_s)
         for c in out.changes:
             self.rec.set_time("time", duration=c.t_s)
             self.rec.log("regime", rr.StateChange(state=c.regime))
-        if out.windows and not getattr(self, "_regime_started", False):
+        if out.windows and not self._regime_started:
             self._regime_started = True
             self.rec.set_time("time", duration=out.windows[0].t_s)
             self.rec.log("regime", rr.StateChange(state=out.windows[0].label))
@@ -156,8 +158,8 @@ class RerunViewer:
         self.rec.log("events", self.rr.TextLog(f"{e['kind']}: {text}", level=level))
 
     def _phase(self, t: np.ndarray, rel: np.ndarray) -> None:
-        if getattr(self, "_delay", None) is None:
-            self._first = np.concatenate([getattr(self, "_first", np.zeros(0)), rel])
+        if self._delay is None:
+            self._first = np.concatenate([self._first, rel])
             if len(self._first) < int(PHASE_SPAN_S * self.fs_hz):
                 return
             try:  # the core's choice: first zero of the autocorrelation
@@ -170,7 +172,7 @@ class RerunViewer:
         keep = int(PHASE_SPAN_S * self.fs_hz) + 2 * d
         self._rel = np.concatenate([self._rel, rel])[-keep:]
         self._rel_t = np.concatenate([self._rel_t, t])[-keep:]
-        if len(self._rel) <= 2 * d or self._rel_t[-1] - getattr(self, "_phase_t", -np.inf) < PHASE_EVERY_S:
+        if len(self._rel) <= 2 * d or self._rel_t[-1] - self._phase_t < PHASE_EVERY_S:
             return
         self._phase_t = float(self._rel_t[-1])
         pts = np.column_stack([self._rel[2 * d:], self._rel[d:-d], self._rel[:-2 * d]])[::4]

@@ -193,10 +193,6 @@ def snr_below(sweep_rows: list[dict], limit_percent: float = 5.0) -> float | Non
 QUICK_ETAS = (0.02, 0.08, 0.25, 0.6)
 
 
-def _coef_dict(model: SindyModel) -> dict[str, dict[str, float]]:
-    return model.as_dict()
-
-
 def run_study(quick: bool = False, seed: int = 0, progress: Callable[[], None] | None = None,
               p: DuffingParams = DuffingParams()) -> dict:
     """Tables 1-3 and Figure 4 of the paper in one run.
@@ -225,8 +221,8 @@ def run_study(quick: bool = False, seed: int = 0, progress: Callable[[], None] |
 
     def ident_summary(ident: Identification, score: dict | None = None) -> dict:
         out = {
-            "coefficients": _coef_dict(ident.model),
-            "sparse_coefficients": _coef_dict(ident.sparse),
+            "coefficients": ident.model.as_dict(),
+            "sparse_coefficients": ident.sparse.as_dict(),
             "equations": ident.model.equations(),
             "pareto": [{"n_nonzero": int(n), "error": float(e) if np.isfinite(e) else None}
                        for n, e in zip(ident.sweep.n_nonzero, ident.sweep.errors)],
@@ -253,7 +249,7 @@ def run_study(quick: bool = False, seed: int = 0, progress: Callable[[], None] |
             "dimension": emb["dimension"],
             "paper": {"delay": 127, "dimension": 3},
             "fnn_fraction": emb["fnn_fraction"],
-            "coefficients": _coef_dict(emb_model),
+            "coefficients": emb_model.as_dict(),
             "equations": emb_model.equations(),
             "error_percent": emb["error_percent"],
             "nrmse": emb["nrmse"],

@@ -150,12 +150,14 @@ class RollingIdentifier:
             bound = 20 * np.abs(xs).max()
             prev = self._prev[i]
             keep_err = np.inf
+            kept = False
             if prev is not None:
                 keep_sim = simulate(self.lib, prev.coefficients, xs[0], t, base, bound=bound).x
                 keep_err = float(integration_errors(keep_sim[None], xs)[0])
             if prev is not None and (keep_err <= cfg.keep_factor * self._prev_err[i] or keep_err <= cfg.keep_nrmse):
                 coefs, err = prev.coefficients, keep_err  # the warm-start model still holds
                 pred[:, i, :] = keep_sim
+                kept = True
             else:
                 self.refits += 1
                 sw = sweep(self.lib, xs, dx, t, base)
@@ -174,7 +176,7 @@ class RollingIdentifier:
             changed = prev is not None and act != _active(prev)
             fits.append(BeamFit(model, err, float(k), fn, act, changed))
             self._prev[i] = model
-            if coefs is not (prev.coefficients if prev is not None else None):
+            if not kept:
                 pred[:, i, :] = simulate(self.lib, coefs, xs[0], t, base, bound=bound).x
         meas = np.stack([np.column_stack([z[:, i], v[:, i]]) for i in range(2)], axis=1)
         return WindowFit(t_end, (fits[0], fits[1]), t, meas, pred)

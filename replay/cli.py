@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -177,9 +178,7 @@ def import_cmd(args) -> int:
     cfg = Config(RigConfig(), DaqConfig(rate_hz=s.fs_hz), source=f"imported from {args.file}")
     rec = McapRecorder(args.output, cfg, port=f"import:{args.file}", flush_s=3600.0)
     n = len(s.t)
-    import time as _time
-
-    now = _time.time_ns()
+    now = time.time_ns()
     for k in range(0, n, 2000):
         e = min(n, k + 2000)
         rec.write_block(SampleBlock(np.arange(k, e, dtype=np.uint32), s.t[k:e], s.values[k:e],

@@ -31,9 +31,8 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from tqdm import tqdm
 
-    for target in (args.json, args.report):
-        if target is not None and target.exists() and target.is_file() and target == args.report:
-            raise ValueError(f"--report {target} is a file; give a folder")
+    if args.report is not None and args.report.is_file():
+        raise ValueError(f"--report {args.report} is a file; give a folder")
     n = 2 * (len(QUICK_ETAS) * 3 if args.quick else len(DEFAULT_ETAS) * 10)
     with tqdm(total=n, desc="noise sweep", disable=args.no_progress, unit="fit") as bar:
         study = run_study(quick=args.quick, seed=args.seed, progress=bar.update)
