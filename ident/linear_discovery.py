@@ -26,7 +26,7 @@ from .physical import edge_samples, integrate_band
 KINDS_RESPONSE = ("acceleration", "velocity", "displacement")
 KINDS_EXCITATION = ("base_acceleration", "force")
 # term codes of the kernel
-T_NONE, T_CUBIC, T_QUAD, T_COULOMB, T_QDAMP, T_CONTACT = 0, 1, 2, 3, 4, 5
+T_NONE, T_CUBIC, T_QUAD, T_COULOMB, T_QDAMP, T_CONTACT, T_LINEAR = 0, 1, 2, 3, 4, 5, 6
 
 
 @dataclass(frozen=True)
@@ -112,6 +112,8 @@ def _term(code, coef, p1, p2, zj, vj):  # pragma: no cover - compiled
         if p2 != 1 and zj < -p1:
             h += zj + p1
         return coef * h
+    if code == 6:  # a linear spring (coef) and damper (p2)
+        return coef * zj + p2 * vj
     return 0.0
 
 

@@ -97,6 +97,62 @@ def read_csv_columns(path: str | Path, columns: list[str], time_col: str | None 
     return data[:, 1:], 1.0 / med
 
 
+def read_mat_columns(path: str | Path, columns: list[str], fs_hz: float | None = None) -> tuple[np.ndarray, float]:
+    """Named signals of a MATLAB file (scipy.io.loadmat) as (n, len(columns)) floats, and the rate.
+
+    A column is a variable holding one signal (``Force``), or row i of a variable holding several
+    (``Acceleration2`` is row 2 of ``Acceleration``, counted from 1: the CSV export's naming). The
+    rate is ``fs_hz`` or the file's ``Fs`` variable.
+    """
+    from scipy.io import loadmat
+
+    path = Path(path)
+    try:
+        mat = loadmat(path)
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such file") from None
+    except (ValueError, TypeError, OSError, NotImplementedError) as exc:
+        raise ValueError(f"{path}: not a readable MAT file ({exc})") from None
+    signals: dict[str, np.ndarray] = {}
+    for name, value in mat.items():
+        if name.startswith("__") or not isinstance(value, np.ndarray) or value.dtype.kind not in "fiu":
+            continue
+        arr = np.squeeze(value.astype(float))
+        if arr.ndim == 1:
+            signals[name] = arr
+        elif arr.ndim == 2:
+            rows = arr if arr.shape[0] < arr.shape[1] else arr.T
+            for i, row in enumerate(rows, start=1):
+                signals[f"{name}{i}"] = row
+    missing = [c for c in columns if c not in signals]
+    if missing:
+        raise ValueError(f"{path}: no signal {missing[0]!r}; signals are: {', '.join(sorted(signals))}")
+    n = {len(signals[c]) for c in columns}
+    if len(n) != 1:
+        raise ValueError(f"{path}: signals {', '.join(columns)} differ in length")
+    data = np.column_stack([signals[c] for c in columns])
+    if not np.all(np.isfinite(data)):
+        raise ValueError(f"{path}: sample {int(np.argmax(~np.isfinite(data).all(axis=1)))} holds NaN or inf")
+    if fs_hz is None:
+        fs = np.asarray(mat.get("Fs", np.nan), float).ravel()
+        if fs.size != 1 or not fs[0] > 0:
+            raise ValueError(f"{path}: no sampling rate (variable Fs); give --fs HZ")
+        fs_hz = float(fs[0])
+    if not fs_hz > 0:
+        raise ValueError(f"--fs must be positive, got {fs_hz}")
+    return data, float(fs_hz)
+
+
+def read_columns(path: str | Path, columns: list[str], time_col: str | None = None,
+                 fs_hz: float | None = None) -> tuple[np.ndarray, float]:
+    """Named columns of a CSV (header row) or a MAT file, by suffix."""
+    if Path(path).suffix.lower() == ".mat":
+        if time_col is not None:
+            raise ValueError("--time is for CSV files; a MAT file carries its rate (Fs) or takes --fs")
+        return read_mat_columns(path, columns, fs_hz)
+    return read_csv_columns(path, columns, time_col, fs_hz)
+
+
 def read_csv(path: str | Path, *, time_col: str | None = None, fs_hz: float | None = None,
              base: str = "base", tip1: str = "tip1", tip2: str = "tip2") -> Samples:
     """A CSV with a header row; times from ``time_col`` (seconds) or a sampling rate ``fs_hz``."""
