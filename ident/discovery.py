@@ -103,7 +103,8 @@ def coordinates(values: np.ndarray, fs_hz: float, f_lo_hz: float = 2.0):
     return lp[:, 0], lp[:, 1:], z, v, r, full[:, 0]
 
 
-def _lsq1(h: np.ndarray, d: np.ndarray) -> tuple[float, float]:
+def lsq1(h: np.ndarray, d: np.ndarray) -> tuple[float, float]:
+    """Least-squares a in d ~ a h, and the share of d's energy it explains (r2)."""
     hh = float(h @ h)
     if hh <= 0:
         return 0.0, 0.0
@@ -136,7 +137,7 @@ def best_contact(z: np.ndarray, d: np.ndarray, n_grid: int = 84) -> tuple[str, f
             h = contact_shape(z, g, side)
             if not np.any(h):
                 continue
-            a, r2 = _lsq1(-h, d)
+            a, r2 = lsq1(-h, d)
             if a > 0 and (best is None or r2 > best[3]):
                 best = (side, float(g), a, r2)
     return best
@@ -157,14 +158,14 @@ def fit_candidates(p: RigParams, i: int, z: np.ndarray, v: np.ndarray, d: np.nda
         out.append(Candidate("contact", resp, {"gap": float(g), "side": side, "stiffness_per_mass": float(a)},
                              _with_beam(p, i, gap_pos_m=gp, gap_neg_m=gn, stopper_stiffness_n_per_m=a * m,
                                         stopper_damping_n_s_per_m=0.0), r2))
-    a, r2 = _lsq1(-zi**3, d)
+    a, r2 = lsq1(-zi**3, d)
     out.append(Candidate("cubic_stiffness", resp, {"coefficient_per_mass": a},
                          _with_beam(p, i, cubic_stiffness_n_per_m3=b.cubic_stiffness_n_per_m3 + a * m), r2))
-    a, r2 = _lsq1(-np.tanh(vi / FRICTION_V_EPS), d)
+    a, r2 = lsq1(-np.tanh(vi / FRICTION_V_EPS), d)
     if a > 0:
         out.append(Candidate("coulomb_friction", resp, {"force_per_mass": a},
                              _with_beam(p, i, coulomb_friction_n=b.coulomb_friction_n + a * m), r2))
-    a, r2 = _lsq1(-vi * np.abs(vi), d)
+    a, r2 = lsq1(-vi * np.abs(vi), d)
     if a > 0:
         out.append(Candidate("quadratic_damping", resp, {"coefficient_per_mass": a},
                              _with_beam(p, i, quadratic_damping_n_s2_per_m2=b.quadratic_damping_n_s2_per_m2 + a * m),

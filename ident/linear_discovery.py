@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from .derivatives import differentiate
-from .discovery import best_contact, split
+from .discovery import best_contact, lsq1, split
 from .filters import lowpass_zero_phase
 from .physical import edge_samples, integrate_band
 
@@ -205,27 +205,19 @@ def refit_with_term(m: LinearModel, t: Term, z, v, a, F, sl: slice) -> tuple[Lin
     return LinearModel(A, B, c, e), _replace(t, coef=float(w[-1]), parameters=params)
 
 
-def _lsq(h, d):
-    hh = float(h @ h)
-    if hh <= 0:
-        return 0.0, 0.0
-    a = float(h @ d) / hh
-    return a, 1.0 - float(np.sum((d - a * h) ** 2)) / max(float(d @ d), 1e-300)
-
-
 def candidate_terms(j: int, z: np.ndarray, v: np.ndarray, d: np.ndarray) -> list[tuple[Term, float]]:
     """Catalogue terms for response j fitted to its residual d; returns (term, r2)."""
     zj, vj = z[:, j], v[:, j]
     out = []
-    a, r2 = _lsq(zj**3, d)
+    a, r2 = lsq1(zj**3, d)
     out.append((Term("cubic_stiffness", j, T_CUBIC, a, parameters={"coefficient_per_mass": -a}), r2))
-    a, r2 = _lsq(zj * np.abs(zj), d)
+    a, r2 = lsq1(zj * np.abs(zj), d)
     out.append((Term("quadratic_stiffness", j, T_QUAD, a, parameters={"coefficient_per_mass": -a}), r2))
     eps = 0.01 * float(np.std(vj)) + 1e-12
-    a, r2 = _lsq(np.tanh(vj / eps), d)
+    a, r2 = lsq1(np.tanh(vj / eps), d)
     if a < 0:
         out.append((Term("coulomb_friction", j, T_COULOMB, a, eps, parameters={"force_per_mass": -a}), r2))
-    a, r2 = _lsq(vj * np.abs(vj), d)
+    a, r2 = lsq1(vj * np.abs(vj), d)
     if a < 0:
         out.append((Term("quadratic_damping", j, T_QDAMP, a, parameters={"coefficient_per_mass": -a}), r2))
     found = best_contact(zj, d, 60)

@@ -48,12 +48,6 @@ class ModalModel:
     def damping_ratios(self) -> np.ndarray:
         return -self.poles.real / np.abs(self.poles)
 
-    def receptance(self, f_hz: np.ndarray) -> np.ndarray:
-        """(k, len(f)) displacement per force at the given frequencies."""
-        s = 2j * np.pi * np.asarray(f_hz, float)
-        p = self.poles[:, None]
-        return self.residues @ (1 / (s - p)) + self.residues.conj() @ (1 / (s - p.conj()))
-
     def input_gain(self, j: int, k: int | None = None, floor: float = 0.05) -> np.ndarray:
         """Modal input of a unit force at response j (minus one at k, for a force between j and k).
 
@@ -152,52 +146,50 @@ def vector_fit(f_hz: np.ndarray, H: np.ndarray, n_modes: int, iterations: int = 
     return ModalModel(poles, _residues(s, H, poles, w))
 
 
-def fit_modal(u: np.ndarray, Y: np.ndarray, kinds_are_acceleration: bool, fs: float, n_modes: int,
-              nperseg: int | None = None, band_share: float = 0.01) -> tuple[ModalModel, np.ndarray]:
-    """Fit receptances from force u and responses Y (accelerations or displacements);
-    returns the model and the fitted band's frequencies (lines where the force has power)."""
+def fit_modal(u: np.ndarray, Y: np.ndarray, fs: float, n_modes: int, nperseg: int | None = None,
+              band_share: float = 0.01) -> tuple[ModalModel, np.ndarray]:
+    """Fit receptances from force u and accelerations Y; returns the model and the fitted band's
+    frequencies (lines where the force has power)."""
     nperseg = nperseg or int(min(len(u) // 4, 2 ** int(np.log2(fs * 20))))
     f, H, puu = frf(u, Y, fs, nperseg)
     keep = (puu > band_share * puu.max()) & (f > 0)
     if keep.sum() < 8:
         raise ValueError("the excitation has power on too few frequency lines to fit a modal model")
     f, H = f[keep], H[:, keep]
-    if kinds_are_acceleration:
-        H = H / -(2 * np.pi * f) ** 2
-    return vector_fit(f, H, n_modes), f
+    return vector_fit(f, H / -(2 * np.pi * f) ** 2, n_modes), f
+
+
+@njit(cache=True, nogil=True)
+def _foh(p, fs):  # pragma: no cover - compiled
+    """x[i+1] = a x[i] + w0 u[i] + w1 u[i+1]: x' = p x + u exact for u linear over a step."""
+    dt = 1.0 / fs
+    a = np.exp(p * dt)
+    w1 = (a - 1 - p * dt) / (p * p * dt)
+    return a, (a - 1) / p - w1, w1
 
 
 @njit(cache=True, nogil=True)
 def _simulate(p, R, F, b, wd, code, coef, p1, p2, g_ext, fs, bound):  # pragma: no cover - compiled
-    """Accelerations (n, k) and the coordinate of the internal force (n, 2: displacement, velocity).
-
-    Modal input u_r = F + b_r (g_ext + term(delta, delta')), delta = sum 2 Re(wd_r x_r).
-    """
+    """Accelerations (n, k); modal input u_r = F + b_r f, f = g_ext + term(delta, delta') with
+    delta = sum 2 Re(wd_r x_r) (term code 0 adds nothing). NaN after |delta| exceeds ``bound``."""
     n = F.shape[0]
     m = p.shape[0]
     k = R.shape[0]
-    dt = 1.0 / fs
-    a = np.exp(p * dt)
-    i0 = (a - 1) / p
-    i1 = (a - 1 - p * dt) / (p * p * dt)
-    w0 = i0 - i1
+    a, w0, w1 = _foh(p, fs)
     out = np.full((n, k), np.nan)
-    coord = np.full((n, 2), np.nan)
     x = np.zeros(m, np.complex128)
     wv = wd * p
 
-    def force(xx):
+    def force(xx, g):
         d = 0.0
         dv = 0.0
         for r in range(m):
             d += 2 * (wd[r] * xx[r]).real
             dv += 2 * (wv[r] * xx[r]).real
-        return d, dv
+        return d, g + _term(code, coef, p1, p2, d, dv)
 
-    d0, dv0 = force(x)
-    f0 = _term(code, coef, p1, p2, d0, dv0) + g_ext[0] if code != 0 else g_ext[0]
+    f0 = force(x, g_ext[0])[1]
     for i in range(n):
-        coord[i, 0], coord[i, 1] = d0, dv0
         u0 = F[i] + b * f0
         xdot = p * x + u0
         for j in range(k):
@@ -207,29 +199,21 @@ def _simulate(p, R, F, b, wd, code, coef, p1, p2, g_ext, fs, bound):  # pragma: 
             out[i, j] = acc
         if i == n - 1:
             break
-        xp = a * x + w0 * u0 + i1 * (F[i + 1] + b * f0)
-        f1 = g_ext[i + 1]
-        if code != 0:
-            dp, dvp = force(xp)
-            f1 += _term(code, coef, p1, p2, dp, dvp)
-        x = a * x + w0 * u0 + i1 * (F[i + 1] + b * f1)
-        if code != 0:
-            d0, dv0 = force(x)
-            if not abs(d0) <= bound:
-                break
-            f0 = _term(code, coef, p1, p2, d0, dv0) + g_ext[i + 1]
-        else:
-            d0, dv0 = force(x)
-            f0 = g_ext[i + 1]
-    return out, coord
+        xp = a * x + w0 * u0 + w1 * (F[i + 1] + b * f0)  # predictor, then the force at its end
+        f1 = force(xp, g_ext[i + 1])[1]
+        x = a * x + w0 * u0 + w1 * (F[i + 1] + b * f1)
+        d0, f0 = force(x, g_ext[i + 1])
+        if not abs(d0) <= bound:
+            break
+    return out
 
 
 def simulate(model: ModalModel, F: np.ndarray, fs: float, *, b: np.ndarray | None = None,
              wd: np.ndarray | None = None, term: tuple = (0, 0.0, 1.0, 0.0), g_ext: np.ndarray | None = None,
-             bound: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+             bound: float = np.inf) -> np.ndarray:
     """Accelerations (n, k) from rest under force F, optionally with an internal force entering with
     modal gains ``b``: a catalogue term (code, coef, p1, p2) on the coordinate with residues ``wd``,
-    or a given signal ``g_ext``. Returns (accelerations, coordinate displacement and velocity)."""
+    or a given signal ``g_ext``."""
     m = model.poles.size
     F = np.ascontiguousarray(F, float)
     b = np.zeros(m, complex) if b is None else np.asarray(b, complex)
@@ -244,18 +228,14 @@ def simulate(model: ModalModel, F: np.ndarray, fs: float, *, b: np.ndarray | Non
 def _state_rates(p, F, b, g, fs):  # pragma: no cover - compiled
     """x_r' (n, m) of x_r' = p_r x_r + F + b_r g from rest, exact for piecewise-linear inputs."""
     n = F.shape[0]
-    m = p.shape[0]
-    dt = 1.0 / fs
-    a = np.exp(p * dt)
-    i0 = (a - 1) / p
-    i1 = (a - 1 - p * dt) / (p * p * dt)
-    out = np.empty((n, m), np.complex128)
-    x = np.zeros(m, np.complex128)
+    a, w0, w1 = _foh(p, fs)
+    out = np.empty((n, p.shape[0]), np.complex128)
+    x = np.zeros(p.shape[0], np.complex128)
     for i in range(n):
         u0 = F[i] + b * g[i]
         out[i] = p * x + u0
         if i < n - 1:
-            x = a * x + (i0 - i1) * u0 + i1 * (F[i + 1] + b * g[i + 1])
+            x = a * x + w0 * u0 + w1 * (F[i + 1] + b * g[i + 1])
     return out
 
 
@@ -297,7 +277,7 @@ def refine_poles(model: ModalModel, F: np.ndarray, Y: np.ndarray, fs: float, seg
 
     def resid(x):
         mm = refit_residues(ModalModel(build(x), model.residues), Fc, Y, fs, seg, b, g)
-        sim = simulate(mm, Fc, fs, b=b, g_ext=g)[0][seg][::stride]
+        sim = simulate(mm, Fc, fs, b=b, g_ext=g)[seg][::stride]
         return ((sim - Y[seg][::stride]) / scale).ravel()
 
     x0 = np.concatenate([np.log(-model.poles.real), np.log(model.poles.imag)])

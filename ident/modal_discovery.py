@@ -30,12 +30,12 @@ is the driving point. Steps:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .discovery import contact_shape, split
-from .linear_discovery import T_CONTACT, T_COULOMB, T_CUBIC, T_LINEAR, T_QDAMP, T_QUAD
+from .discovery import lsq1, contact_shape, split
+from .linear_discovery import T_CONTACT, T_COULOMB, T_CUBIC, T_LINEAR, T_QDAMP, T_QUAD, Term, term_values
 from .modal import ModalModel, fit_modal, refine_poles, refit_residues, simulate
 from .physical import edge_samples, integrate_band
 
@@ -81,18 +81,22 @@ def _nrmse(sim: np.ndarray, meas: np.ndarray) -> float:
     return float(np.mean(np.sqrt(np.mean((sim - meas) ** 2, axis=0)) / meas.std(axis=0)))
 
 
-def _coordinates(model: ModalModel, Y: np.ndarray, fs: float, names: list[str]):
-    """(name, b, wd, measured displacement, velocity) for each response and each pair."""
+def _coordinates(Y: np.ndarray, fs: float, names: list[str]) -> dict[str, tuple[tuple[int, ...], np.ndarray, np.ndarray]]:
+    """Each response and each pair 'A-B': (response indices, measured displacement, velocity)."""
     v, z = integrate_band(Y, fs, F_LO_HZ)
     k = Y.shape[1]
-    out = []
-    for j in range(k):
-        out.append((names[j], model.input_gain(j), model.residues[j], z[:, j], v[:, j]))
+    out = {names[j]: ((j,), z[:, j], v[:, j]) for j in range(k)}
     for j in range(k):
         for i in range(j + 1, k):
-            out.append((f"{names[j]}-{names[i]}", model.input_gain(j, i), model.residues[j] - model.residues[i],
-                        z[:, j] - z[:, i], v[:, j] - v[:, i]))
+            out[f"{names[j]}-{names[i]}"] = ((j, i), z[:, j] - z[:, i], v[:, j] - v[:, i])
     return out
+
+
+def _gains(model: ModalModel, idx: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Modal input gains and displacement residues of a response (j,) or a pair (j, i)."""
+    if len(idx) == 1:
+        return model.input_gain(idx[0]), model.residues[idx[0]]
+    return model.input_gain(*idx), model.residues[idx[0]] - model.residues[idx[1]]
 
 
 def _shapes(zc: np.ndarray, vc: np.ndarray):
@@ -112,11 +116,11 @@ def fit_order(F: np.ndarray, Y: np.ndarray, fs: float, seg: slice, max_modes: in
     kept, misses = None, 0
     for m in range(1, max_modes + 1):
         try:
-            model, _ = fit_modal(F[seg], Y[seg], True, fs, m, nperseg=nperseg)
+            model, _ = fit_modal(F[seg], Y[seg], fs, m, nperseg=nperseg)
         except ValueError:
             break
         model = refine_poles(refit_residues(model, F, Y, fs, seg), F, Y, fs, seg, stride=4, max_nfev=12)
-        err = _nrmse(simulate(model, F, fs)[0][seg], Y[seg])
+        err = _nrmse(simulate(model, F, fs)[seg], Y[seg])
         if kept is None or (err < 0.9 * kept[0] and kept[0] - err > 0.005):
             kept, misses = (err, model), 0
         else:
@@ -148,29 +152,24 @@ def discover_modal(F: np.ndarray, Y: np.ndarray, names: list[str], fs: float, *,
     else:
         Ff, Yf, fit_seg = F[:train.stop], Y[:train.stop], train
     model = fit_order(Ff, Yf, fs, fit_seg, max_modes)
-    base_fit_sim = simulate(model, Ff, fs)[0]
-    fit_eval = fit_seg if fit_data is not None else test
-    base_fit = _nrmse(base_fit_sim[fit_eval], Yf[fit_eval]) if fit_data is not None else np.nan
-    base_sim = simulate(model, F, fs)[0]
+    base_fit = _nrmse(simulate(model, Ff, fs)[fit_seg], Yf[fit_seg]) if fit_data is not None else np.nan
+    base_sim = simulate(model, F, fs)
     base_err = _nrmse(base_sim[test], Y[test])
     d = Y - base_sim
     scale = Y[train].std(axis=0)
     resid = {names[j]: float(np.sqrt(np.mean(d[train, j] ** 2))) for j in range(k)}
-    bound = 50.0 * float(np.max(np.abs(integrate_band(Y, fs, F_LO_HZ)[1]))) + 1e-12
+    coords = _coordinates(Y, fs, names)
+    bound = 50.0 * max(float(np.max(np.abs(zc))) for _, zc, _ in coords.values()) + 1e-12
     zero = np.zeros(n)
 
     def regress(b, g):
         """Least-squares coefficient of the force g (as a force on the structure) against the residual."""
-        yg = simulate(model, zero, fs, b=b, g_ext=g)[0][train] / scale
-        dd = d[train] / scale
-        gg = float(np.sum(yg * yg))
-        if gg <= 0:
-            return 0.0, 0.0
-        c = float(np.sum(yg * dd)) / gg
-        return c, 1.0 - float(np.sum((dd - c * yg) ** 2)) / float(np.sum(dd * dd))
+        yg = simulate(model, zero, fs, b=b, g_ext=g)[train] / scale
+        return lsq1(yg.ravel(), (d[train] / scale).ravel())
 
     cands = []
-    for name, b, wd, zc, vc in _coordinates(model, Y, fs, names):
+    for name, (idx, zc, vc) in coords.items():
+        b, wd = _gains(model, idx)
         for effect, code, p1, p2, g, params in _shapes(zc, vc):
             c, r2 = regress(b, g)
             cands.append(ModalCandidate(effect, name, params(c), (code, c, p1, p2), b, wd, r2))
@@ -183,8 +182,8 @@ def discover_modal(F: np.ndarray, Y: np.ndarray, names: list[str], fs: float, *,
                                         (T_CONTACT, c, gap, {"both": 0, "positive": 1, "negative": 2}[side]),
                                         b, wd, r2))
         # an interface spring and damper off nominal (equivalent linear)
-        yz = simulate(model, zero, fs, b=b, g_ext=zc)[0][train] / scale
-        yv = simulate(model, zero, fs, b=b, g_ext=vc)[0][train] / scale
+        yz = simulate(model, zero, fs, b=b, g_ext=zc)[train] / scale
+        yv = simulate(model, zero, fs, b=b, g_ext=vc)[train] / scale
         X = np.column_stack([yz.ravel(), yv.ravel()])
         dd = (d[train] / scale).ravel()
         ks, cs = np.linalg.lstsq(X, dd, rcond=None)[0]
@@ -192,73 +191,56 @@ def discover_modal(F: np.ndarray, Y: np.ndarray, names: list[str], fs: float, *,
         cands.append(ModalCandidate("linear_mismatch", name, {"stiffness_n_per_m": -float(ks),
                                                                "damping_n_s_per_m": -float(cs)},
                                     (T_LINEAR, float(ks), 1.0, float(cs)), b, wd, r2))
+
     def score(c: ModalCandidate) -> ModalCandidate:
         mod = c.model or model
-        sim = simulate(mod, F, fs, b=c.b, wd=c.wd, term=c.term, bound=bound)[0]
+        sim = simulate(mod, F, fs, b=c.b, wd=c.wd, term=c.term, bound=bound)
         err = _nrmse(sim[test], Y[test])
         gain = 1.0 - err / base_err if np.isfinite(err) else -np.inf
         fit_err, holds = np.nan, True
         if fit_data is not None:
-            fit_err = _nrmse(simulate(mod, Ff, fs, b=c.b, wd=c.wd, term=c.term, bound=bound)[0][fit_seg],
+            fit_err = _nrmse(simulate(mod, Ff, fs, b=c.b, wd=c.wd, term=c.term, bound=bound)[fit_seg],
                              Yf[fit_seg])
             holds = bool(np.isfinite(fit_err) and fit_err <= base_fit * (1 + gain_floor))
-        return _replace(c, test_nrmse=err, gain=gain, fit_data_nrmse=fit_err, holds_at_fit_level=holds)
+        return replace(c, test_nrmse=err, gain=gain, fit_data_nrmse=fit_err, holds_at_fit_level=holds)
 
     scored = sorted((score(c) for c in cands), key=lambda c: -c.gain)
     if fit_data is not None:
         # the baseline data hold the effect too (weaker): refit the linear part with the term in place
         # for the leading nonlinear candidates, re-estimate the coefficient, score again
-        coords_fit = {name: (zc, vc) for name, _, _, zc, vc in _coordinates(model, Yf, fs, names)}
-        coords = {name: (zc, vc) for name, _, _, zc, vc in _coordinates(model, Y, fs, names)}
+        coords_fit = _coordinates(Yf, fs, names)
         lead = [c for c in scored if c.effect != "linear_mismatch" and np.isfinite(c.gain)][:joint_top]
         scored = sorted([c for c in scored if all(c is not x for x in lead)]
-                        + [score(_joint(c, model, Ff, Yf, fs, fit_seg, F, Y, train, scale, coords_fit, coords,
-                                        names)) for c in lead], key=lambda c: -c.gain)
-    scored.sort(key=lambda c: -c.gain)
+                        + [score(_joint(c, model, Ff, Yf, fs, fit_seg, F, Y, train, scale, coords_fit, coords))
+                           for c in lead], key=lambda c: -c.gain)
     # the best cause that also holds on the baseline data; if none does, the best by gain (flagged)
     above = [c for c in scored if c.gain > gain_floor]
     best = next((c for c in above if c.holds_at_fit_level), above[0] if above else None)
     findings = [best] if best is not None else []
-    ext_sim = (simulate(best.model or model, F, fs, b=best.b, wd=best.wd, term=best.term, bound=bound)[0]
+    ext_sim = (simulate(best.model or model, F, fs, b=best.b, wd=best.wd, term=best.term, bound=bound)
                if best else base_sim)
     ext_err = best.test_nrmse if best else base_err
     return ModalDiscovery(model, base_err, base_fit, ext_err, 1.0 - ext_err / base_err, findings, scored, train,
                           test, resid, base_sim, ext_sim)
 
 
-def _gains(model: ModalModel, names: list[str], coordinate: str) -> tuple[np.ndarray, np.ndarray]:
-    """Modal input gains and displacement residues of a response or a pair 'A-B'."""
-    parts = [names.index(x) for x in coordinate.split("-")] if coordinate not in names else [names.index(coordinate)]
-    if len(parts) == 1:
-        return model.input_gain(parts[0]), model.residues[parts[0]]
-    return model.input_gain(*parts), model.residues[parts[0]] - model.residues[parts[1]]
-
-
-def _joint(c: ModalCandidate, model: ModalModel, Ff, Yf, fs, fit_seg, F, Y, train, scale, coords_fit, coords,
-           names) -> ModalCandidate:
+def _joint(c: ModalCandidate, model: ModalModel, Ff, Yf, fs, fit_seg, F, Y, train, scale, coords_fit,
+           coords) -> ModalCandidate:
     """Refit the linear part on the baseline data driven by F and the candidate's force (evaluated on the
     measured coordinate there), then the coefficient on the data's residual with that linear part."""
-    from .linear_discovery import Term, term_values
-
     code, coef, p1, p2 = c.term
     shape = Term(c.effect, 0, code, 1.0, p1, p2)
-    g_fit = coef * term_values(shape, *coords_fit[c.response])
+    idx, zf, vf = coords_fit[c.response]
+    g_fit = coef * term_values(shape, zf, vf)
     m2 = refit_residues(model, Ff, Yf, fs, fit_seg, c.b, g_fit)
     m2 = refine_poles(m2, Ff, Yf, fs, fit_seg, stride=4, max_nfev=15, b=c.b, g=g_fit)
-    b, wd = _gains(m2, names, c.response)
-    d = (Y - simulate(m2, F, fs)[0])[train] / scale
-    yg = simulate(m2, np.zeros(len(F)), fs, b=b, g_ext=term_values(shape, *coords[c.response]))[0][train] / scale
-    new = float(np.sum(yg * d)) / max(float(np.sum(yg * yg)), 1e-300)
+    b, wd = _gains(m2, idx)
+    _, z, v = coords[c.response]
+    d = (Y - simulate(m2, F, fs))[train] / scale
+    yg = simulate(m2, np.zeros(len(F)), fs, b=b, g_ext=term_values(shape, z, v))[train] / scale
+    new = lsq1(yg.ravel(), d.ravel())[0]
     key = next(iter(c.parameters)) if c.effect != "contact" else "stiffness_n_per_m"
-    params = dict(c.parameters)
-    params[key] = -new
-    return _replace(c, term=(code, new, p1, p2), b=b, wd=wd, model=m2, parameters=params)
-
-
-def _replace(c: ModalCandidate, **kw) -> ModalCandidate:
-    from dataclasses import replace
-
-    return replace(c, **kw)
+    return replace(c, term=(code, new, p1, p2), b=b, wd=wd, model=m2, parameters={**c.parameters, key: -new})
 
 
 def _best_contact(regress, b, zc: np.ndarray, n_grid: int = 24):

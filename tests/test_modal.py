@@ -85,12 +85,12 @@ def test_vector_fit_then_time_domain_poles_recover_the_chains_modes(linear_chain
     F, A = linear_chain
     seg = slice(400, len(F))
     f_true, z_true = true_modes()
-    m, _ = fit_modal(F[seg], A[seg], True, FS, 3)
+    m, _ = fit_modal(F[seg], A[seg], FS, 3)
     assert np.allclose(m.frequencies_hz, f_true, rtol=5e-3)  # the H1 estimate (Hann window) is biased
     m = refine_poles(refit_residues(m, F, A, FS, seg), F, A, FS, seg)
     assert np.allclose(m.frequencies_hz, f_true, rtol=1e-5)
     assert np.allclose(m.damping_ratios, z_true, rtol=1e-3)
-    sim = simulate(m, F, FS)[0]
+    sim = simulate(m, F, FS)
     assert np.max(np.abs(sim[seg] - A[seg])) < 1e-3 * np.max(np.abs(A))
     # the order is chosen, not given: one more mode than three buys nothing
     assert fit_order(F, A, FS, seg).poles.size == 3
