@@ -106,7 +106,8 @@ def ident_rate(cfg: RollingConfig) -> float:
 
 
 class RollingIdentifier:
-    """Feed blocks of unfiltered samples; get a WindowFit every hop."""
+    """Feed blocks of unfiltered samples; get a WindowFit every hop (windows end on multiples of the hop
+    counted from the first sample, so the fits do not depend on how the stream is cut into blocks)."""
 
     def __init__(self, cfg: RollingConfig = RollingConfig()):
         if cfg.hop_s > cfg.window_s:
@@ -130,12 +131,17 @@ class RollingIdentifier:
         if x.ndim != 2 or x.shape[1] != 3:
             raise ValueError(f"rolling identification needs blocks of shape (n, 3), got {x.shape}")
         out = []
-        self._buf = np.concatenate([self._buf, x])[-self.n_window:]
-        self._since += len(x)
-        self.n_seen += len(x)
-        if len(self._buf) >= self.n_window and self._since >= self.n_hop:
-            self._since = 0
-            out.append(self.fit_window(self._buf, self.n_seen / self.cfg.fs_hz))
+        i = 0
+        while i < len(x):  # windows end on the hop grid, however the stream is cut into blocks
+            piece = x[i:i + self.n_hop - self._since]
+            i += len(piece)
+            self._buf = np.concatenate([self._buf, piece])[-self.n_window:]
+            self._since += len(piece)
+            self.n_seen += len(piece)
+            if self._since == self.n_hop:
+                self._since = 0
+                if len(self._buf) >= self.n_window:
+                    out.append(self.fit_window(self._buf, self.n_seen / self.cfg.fs_hz))
         return out
 
     def fit_window(self, x: np.ndarray, t_end: float) -> WindowFit:
