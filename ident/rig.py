@@ -57,6 +57,7 @@ class Beam:
     cubic_stiffness_n_per_m3: float = 0.0  # positive hardens
     coulomb_friction_n: float = field(default=0.0, metadata={"min": 0.0})
     quadratic_damping_n_s2_per_m2: float = field(default=0.0, metadata={"min": 0.0})
+    quadratic_stiffness_n_per_m2: float = 0.0  # force k2 z|z|; positive hardens
 
     @property
     def stiffness_n_per_m(self) -> float:
@@ -74,14 +75,15 @@ class RigParams:
     coupling_stiffness_n_per_m: float = field(default=1.0, metadata={"min": 0.0})
 
     def vector(self) -> np.ndarray:
-        """Per-mass parameter vector of the compiled kernel (layout in ``_PARAM_NAMES``)."""
+        """Per-mass parameter vector of the compiled kernel (``N_PER_BEAM`` per beam, layout as ``_accel``
+        reads it: w^2, c, k_coupling, gap+, gap-, k_stopper, c_stopper, k3, F_coulomb, c_quadratic, k2)."""
         out = []
         for b in (self.beam1, self.beam2):
             m = b.mass_kg
             out += [b.stiffness_n_per_m / m, b.damping_n_s_per_m / m, self.coupling_stiffness_n_per_m / m,
                     b.gap_pos_m, b.gap_neg_m, b.stopper_stiffness_n_per_m / m, b.stopper_damping_n_s_per_m / m,
                     b.cubic_stiffness_n_per_m3 / m, b.coulomb_friction_n / m,
-                    b.quadratic_damping_n_s2_per_m2 / m]
+                    b.quadratic_damping_n_s2_per_m2 / m, b.quadratic_stiffness_n_per_m2 / m]
         return np.array(out, dtype=float)
 
     def with_beams(self, **changes) -> "RigParams":
@@ -89,7 +91,7 @@ class RigParams:
         return replace(self, beam1=replace(self.beam1, **changes), beam2=replace(self.beam2, **changes))
 
 
-N_PER_BEAM = 10
+N_PER_BEAM = 11
 # Velocity scale below which Coulomb friction is smoothed (tanh), m/s.
 FRICTION_V_EPS = 1e-4
 
@@ -109,7 +111,8 @@ def _accel(p, z, v, ab, kick, out_a, out_contact):  # pragma: no cover - compile
         k3 = p[o + 7]
         fc = p[o + 8]
         cq = p[o + 9]
-        f = w2 * z[i] + c * v[i] + kc * (z[i] - z[j]) + k3 * z[i] ** 3
+        k2 = p[o + 10]
+        f = w2 * z[i] + c * v[i] + kc * (z[i] - z[j]) + k3 * z[i] ** 3 + k2 * z[i] * abs(z[i])
         f += fc * np.tanh(v[i] / FRICTION_V_EPS) + cq * v[i] * abs(v[i])
         contact = 0
         if z[i] > gp:

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ident.excitation import Excitation, Kick
-from ident.rig import RigConfig, RigParams, RigSimulator, simulate_rig
+from ident.rig import RigConfig, RigParams, RigSimulator, simulate_measured_base, simulate_rig
 
 F_HZ = 12.3
 
@@ -113,3 +113,18 @@ def test_any_split_into_blocks_gives_the_same_stream(sizes):
     sim = RigSimulator(cfg, 2000.0)
     parts = [sim.advance(k)[1].tip2 for k in sizes]
     np.testing.assert_array_equal(np.concatenate(parts), whole.tip2)
+
+
+@pytest.mark.parametrize("push", [-5.0, 5.0])
+def test_quadratic_stiffness_static_deflection_is_the_root_of_the_quadratic(push):
+    """A constant base acceleration A on a beam with force k2 z|z|: at rest w^2 z + (k2/m) z|z| = -A,
+    so |z| = (-w^2 + sqrt(w^4 + 4 q |A|)) / (2 q), q = k2/m, on the side opposite to A."""
+    k2 = 5.0e4
+    p = replace(RigParams().with_beams(gap_pos_m=np.inf, gap_neg_m=np.inf, quadratic_stiffness_n_per_m2=k2),
+                coupling_stiffness_n_per_m=0.0)
+    b = p.beam1
+    w2, q = b.stiffness_n_per_m / b.mass_kg, k2 / b.mass_kg
+    expected = -np.sign(push) * (-w2 + np.sqrt(w2**2 + 4 * q * abs(push))) / (2 * q)
+    o = simulate_measured_base(p, np.full(40_000, push), 2000.0)  # 20 s, about 40 decay times
+    assert o.z[-1, 0] == pytest.approx(expected, rel=1e-6)
+    assert abs(expected) < 0.9 * abs(push) / w2  # and it is stiffer than the linear beam
