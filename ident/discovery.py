@@ -351,13 +351,14 @@ def busiest(weight: np.ndarray, segs: Segments, n: int) -> Segments:
 
 
 def refine_contact(c: Candidate, i: int, nominal: RigParams, base, tips, z, v, d, fs: float, train: Segments,
-                   seconds: float = 8.0, max_evals: int = 40) -> Candidate:
+                   seconds: float = 8.0, max_evals: int = 80) -> Candidate:
     """Refine a contact's side, gap and stiffness by simulation error on training data where it is hit.
 
     The least-squares fit is biased twice: displacement from integrated accelerations is smoothed
     during millisecond contacts (stiffness low), and its mean is removed, which shifts a one-sided
     stopper's apparent gap and can make it look two-sided. So each side starts from its own
-    least-squares gap and Nelder-Mead adjusts (gap, log stiffness) against the measured tips over
+    least-squares gap, scans the gap (``SCAN``) on the busiest 2 s, and the two sides that
+    scan best are polished by Nelder-Mead on (gap, log stiffness) against the measured tips over
     the ``seconds`` of training data with the most samples beyond the gap; the side with the
     smallest simulation error is kept.
     """
@@ -366,7 +367,8 @@ def refine_contact(c: Candidate, i: int, nominal: RigParams, base, tips, z, v, d
     zi = z[indices(train), i]
     hit_weight = (np.abs(z[:, i]) > float(c.parameters["gap"])).astype(float)
     segs = busiest(hit_weight, train, int(seconds * fs))
-    best = None
+    short = busiest(hit_weight, train, int(2 * fs))
+    starts = []
     for side in ("both", "positive", "negative"):
         found = best_contact(zi, d, sides=(side,), linear_per_mass=_linear_per_mass(nominal, i))
         if found is None:
@@ -383,15 +385,21 @@ def refine_contact(c: Candidate, i: int, nominal: RigParams, base, tips, z, v, d
             return _test_error(extended_rig(nominal, i, "contact", params_at(x)), base, tips, z, v, fs, on)
 
         # A stiff stopper under random excitation makes the error a narrow valley in the gap (impacts
-        # decide the trajectory): scan the gap on the busiest 2 s first, then polish from the best.
-        short = busiest(hit_weight, train, int(2 * fs))
-        g1 = min(SCAN, key=lambda f: err(np.array([f, 1.0]), on=short))
+        # decide the trajectory): scan the gap on the busiest 2 s first ...
+        e1, g1 = min((err(np.array([f, 1.0]), on=short), f) for f in SCAN)
+        starts.append((e1, g1, params_at, err))
+    best = None
+    for _, g1, params_at, err in sorted(starts, key=lambda s: s[0])[:2]:  # ... then polish the two best sides
         # the stiffness is uncertain by orders of magnitude, the gap by percent: a simplex that says so
-        res = minimize(err, np.array([g1, 1.0]), method="Nelder-Mead",
-                       options={"maxfev": max_evals, "xatol": 1e-3, "fatol": 1e-4,
-                                "initial_simplex": [[g1, 1.0], [g1 * 1.03, 1.0], [g1, 2.5]]})
-        e0 = err(np.array([1.0, 0.0]))
-        x, e = (res.x, res.fun) if res.fun <= e0 else (np.array([1.0, 0.0]), e0)
+        # from the scan's point or the regression's, whichever fits the polishing window better;
+        # restarted once: a fresh simplex follows the long gap-stiffness valley further
+        x = min((np.array([g1, 1.0]), np.array([1.0, 0.0]), np.array([1.0, 1.0])), key=err)
+        for step in (1.5, 0.7):
+            res = minimize(err, x, method="Nelder-Mead",
+                           options={"maxfev": max_evals // 2, "xatol": 1e-3, "fatol": 1e-5,
+                                    "initial_simplex": [x, x * (1.03, 1), x + (0.0, step)]})
+            x = res.x
+        e = float(res.fun)
         if best is None or e < best[0]:
             best = (e, params_at(x))
     x = best[1]
