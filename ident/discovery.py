@@ -49,11 +49,12 @@ from .filters import lowpass_zero_phase
 from .physical import edge_samples, integrate_band
 from .rig import FRICTION_V_EPS, N_PER_BEAM, TWO_PI, Beam, RigParams, simulate_measured_base
 
-EFFECTS = ("contact", "cubic_stiffness", "quadratic_stiffness", "coulomb_friction", "quadratic_damping",
-           "linear_mismatch", "sensor_gain", "sensor_offset", "clipping")
+# the causes that change the rig's equations, then those that act on the sensors
+MECHANICAL = ("contact", "cubic_stiffness", "quadratic_stiffness", "coulomb_friction", "quadratic_damping",
+              "linear_mismatch")
+EFFECTS = MECHANICAL + ("sensor_gain", "sensor_offset", "clipping")
 CLIP_SHARE = 0.002  # a channel is clipped when this share of its samples sits at its extreme value
 GAIN_FLOOR = 0.05
-MECHANICAL = EFFECTS[:6]  # the causes that change the rig's equations (the rest act on the sensors)
 CONTACT_R2 = 0.05  # a contact explaining less of the residual force is not refined (nor named, in practice)
 REFINE_WITHIN = 0.15  # candidates this close to a response's best gain are refined before the choice
 SCAN = tuple(np.linspace(0.4, 1.6, 31))  # gap factors a contact's refinement scans before polishing
