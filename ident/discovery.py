@@ -279,14 +279,10 @@ def refine(c: Candidate, i: int, nominal: RigParams, base, tips, z, v, fs: float
     return replace(c, parameters=x, params=extended_rig(nominal, i, c.effect, x))
 
 
-def simulated_tips(p: RigParams, values: np.ndarray, fs: float, segs: Segments, output: tuple = ()):
+def simulated_tips(p: RigParams, base, tips, z, v, fs: float, segs: Segments, output: tuple = ()):
     """(measured tips, simulated tips) below 50 Hz over the segments, concatenated; the rig driven by
-    the measured base and started ``warm_up_s`` before each segment from the measured state there."""
-    base, tips, z, v, _, _ = coordinates(values, fs)
-    return _measured_and_simulated(p, base, tips, z, v, fs, segs, output)
-
-
-def _measured_and_simulated(p: RigParams, base, tips, z, v, fs: float, segs: Segments, output: tuple = ()):
+    the measured base and started ``warm_up_s`` before each segment from the measured state there.
+    ``base, tips, z, v`` as ``coordinates`` returns them."""
     meas, pred = [], []
     for seg in segs:
         meas.append(tips[seg])
@@ -324,7 +320,7 @@ def _simulated_tips(p: RigParams, base: np.ndarray, z: np.ndarray, v: np.ndarray
 def _test_error(p: RigParams, base: np.ndarray, tips: np.ndarray, z: np.ndarray, v: np.ndarray, fs: float,
                 test: Segments, output: tuple = ()) -> float:
     """NRMSE of the tips below 50 Hz over the segments (mean over the two tips); inf if it diverges."""
-    meas, pred = _measured_and_simulated(p, base, tips, z, v, fs, test, output)
+    meas, pred = simulated_tips(p, base, tips, z, v, fs, test, output)
     if not np.all(np.isfinite(pred)):
         return np.inf
     return float(np.mean(np.sqrt(np.mean((pred - meas) ** 2, axis=0)) / meas.std(axis=0)))
@@ -391,9 +387,9 @@ def refine_contact(c: Candidate, i: int, nominal: RigParams, base, tips, z, v, d
         starts.append((e1, g1, params_at, err))
     best = None
     for _, g1, params_at, err in sorted(starts, key=lambda s: s[0])[:2]:  # ... then polish the two best sides
-        # the stiffness is uncertain by orders of magnitude, the gap by percent: a simplex that says so
-        # from the scan's point or the regression's, whichever fits the polishing window better;
-        # restarted once: a fresh simplex follows the long gap-stiffness valley further
+        # from the scan's point or the regression's, whichever fits the polishing window better; the
+        # simplex spans 3 % in the gap and a factor e^1.5 in stiffness (uncertain by orders of magnitude),
+        # restarted once because a fresh simplex follows the long gap-stiffness valley further
         x = min((np.array([g1, 1.0]), np.array([1.0, 0.0]), np.array([1.0, 1.0])), key=err)
         for step in (1.5, 0.7):
             res = minimize(err, x, method="Nelder-Mead",
@@ -410,7 +406,7 @@ def refine_contact(c: Candidate, i: int, nominal: RigParams, base, tips, z, v, d
 def sensor_candidates(p: RigParams, base, tips, raw_tips, z, v, fs: float, train: Segments) -> list[Candidate]:
     """Output effects, from the nominal simulation against the measurement on the training segment:
     gain error (least-squares scale), offset (mean difference), clipping (samples piled at the extreme)."""
-    meas_all, pred = _measured_and_simulated(p, base, tips, z, v, fs, train)
+    meas_all, pred = simulated_tips(p, base, tips, z, v, fs, train)
     out = []
     for ch in range(2):
         meas, sim = meas_all[:, ch], pred[:, ch]
@@ -427,10 +423,14 @@ def sensor_candidates(p: RigParams, base, tips, raw_tips, z, v, fs: float, train
     return out
 
 
-def split(n: int, edge: int, train: slice | None, test: slice | None) -> tuple[slice, slice]:
-    """Training and held-out segments; default the first 60 % and the last 40 %, integration edges cut."""
+def _check_length(n: int, edge: int) -> None:
     if n < 10 * edge:
         raise ValueError(f"{n} samples are too few for discovery; need at least {10 * edge}")
+
+
+def split(n: int, edge: int, train: slice | None, test: slice | None) -> tuple[slice, slice]:
+    """Training and held-out segments; default the first 60 % and the last 40 %, integration edges cut."""
+    _check_length(n, edge)
     cut = int(0.6 * n)
     train = train or slice(edge, cut)
     test = test or slice(cut, n - edge)
@@ -450,8 +450,7 @@ def interleaved_split(n: int, edge: int, train: slice | None = None,
     if train is not None or test is not None:
         tr, te = split(n, edge, train, test)
         return (tr,), (te,)
-    if n < 10 * edge:
-        raise ValueError(f"{n} samples are too few for discovery; need at least {10 * edge}")
+    _check_length(n, edge)
     b = np.linspace(edge, n - edge, N_BLOCKS + 1).astype(int)
     train: list[slice] = []
     for k in range(N_BLOCKS):
@@ -500,15 +499,15 @@ def discover(values: np.ndarray, fs_hz: float, nominal: RigParams, *, train: sli
             cands.append(c)
     cands += sensor_candidates(nominal, base, tips, values[:, 1:], z, v, fs_hz, tr)
 
-    def scored(c: Candidate) -> Candidate:
+    def score(c: Candidate) -> Candidate:
         err = _test_error(c.params, base, tips, z, v, fs_hz, te, c.output)
         return replace(c, test_nrmse=err, gain=1.0 - err / base_err if np.isfinite(err) and base_err > 0 else -np.inf)
 
-    cands = sorted(map(scored, cands), key=lambda c: -c.gain)
+    cands = sorted(map(score, cands), key=lambda c: -c.gain)
     # the leading mechanical causes of each response (a contact is refined already) are refined by
     # simulation error too, so that they compete on equal terms, then scored again
     lead = {resp: max((c.gain for c in cands if c.response == resp), default=-np.inf) for resp in ("tip1", "tip2")}
-    scored = sorted((scored(refine(c, int(c.response[-1]) - 1, nominal, base, tips, z, v, fs_hz, tr))
+    scored = sorted((score(refine(c, int(c.response[-1]) - 1, nominal, base, tips, z, v, fs_hz, tr))
                      if c.effect in MECHANICAL and c.effect != "contact" and c.gain > gain_floor
                      and c.gain >= lead[c.response] - REFINE_WITHIN else c for c in cands), key=lambda c: -c.gain)
     findings = []

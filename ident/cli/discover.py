@@ -98,13 +98,16 @@ def _clean(v):
     return v
 
 
-def result_json(d) -> dict:
-    def eq(c) -> str:
-        return f"{c.response}: {c.effect} ({_params_text(c.parameters)})"
+def _equation(response: str, effect: str, parameters: dict) -> str:
+    """One finding as the JSON's ``extended.equations`` lists it."""
+    return f"{response}: {effect} ({_params_text(parameters)})"
 
+
+def result_json(d) -> dict:
     return {
         "baseline": {"test_nrmse": _clean(d.baseline_test_nrmse)},
-        "extended": {"test_nrmse": _clean(d.extended_test_nrmse), "equations": [eq(c) for c in d.findings]},
+        "extended": {"test_nrmse": _clean(d.extended_test_nrmse),
+                     "equations": [_equation(c.response, c.effect, c.parameters) for c in d.findings]},
         "gain": _clean(d.gain),
         "findings": [{"effect": c.effect, "response": c.response, "parameters": c.parameters,
                       "gain": _clean(c.gain)} for c in d.findings],
@@ -178,7 +181,7 @@ def run_linear(args) -> int:
     d = discover_linear(data[:, 0], data[:, 1:], names, [k for _, k in specs], exc_kind, fs, train=train, test=test)
     js = {"baseline": {"test_nrmse": d.baseline_test_nrmse}, "extended": {
         "test_nrmse": d.extended_test_nrmse,
-        "equations": [f"{f['response']}: {f['effect']} ({_params_text(f['parameters'])})" for f in d.findings]},
+        "equations": [_equation(f["response"], f["effect"], f["parameters"]) for f in d.findings]},
         "gain": d.gain, "findings": d.findings, "candidates": d.candidates,
         "split": split_json(d.train, d.test),
         "residual_rms": d.residual_rms}
@@ -233,7 +236,7 @@ def _run_modal(args, data, fs, names, specs, cols, train, test) -> int:
                 "test_nrmse": _clean(c.test_nrmse), "fit_r2": c.fit_r2,
                 "fit_data_nrmse": _clean(c.fit_data_nrmse), "holds_at_fit_level": c.holds_at_fit_level}
 
-    eqs = [f"{c.response}: {c.effect} ({_params_text(c.parameters)})" for c in d.findings]
+    eqs = [_equation(c.response, c.effect, c.parameters) for c in d.findings]
     js = {"baseline": {"test_nrmse": d.baseline_test_nrmse, "fit_data_nrmse": _clean(d.baseline_fit_nrmse),
                        "fitted_on": fit_where,
                        "modes": [{"frequency_hz": float(f), "damping_ratio": float(z)}
@@ -417,17 +420,17 @@ def _report(folder: Path, d, js: dict, s) -> None:
 
     folder.mkdir(parents=True, exist_ok=True)
     fs = s.fs_hz
+    base, tips, z, v, r, base_full = coordinates(s.values, fs)
     # held-out blocks, the one the baseline misses most first (its first 3 s are plotted)
-    blocks = [(seg, *simulated_tips(d.nominal, s.values, fs, (seg,))) for seg in d.test]
+    blocks = [(seg, *simulated_tips(d.nominal, base, tips, z, v, fs, (seg,))) for seg in d.test]
     blocks.sort(key=lambda b: -float(np.mean((b[1] - b[2]) ** 2)))
     test = tuple(b[0] for b in blocks)
     meas, base_sim = np.concatenate([b[1] for b in blocks]), np.concatenate([b[2] for b in blocks])
-    _, ext_sim = simulated_tips(d.extended, s.values, fs, test, d.extended_output)
+    _, ext_sim = simulated_tips(d.extended, base, tips, z, v, fs, test, d.extended_output)
     _plot_time_psd(folder / "baseline_extended_measured.png", indices(test) / fs, meas,
                    base_sim, ext_sim, ["tip 1", "tip 2"], fs, 60.0)
     _plot_ranking(folder / "ranking.png", [(f"{c['effect']} ({c['response']})", c["gain"], c["gain"] > 0.05)
                                            for c in js["candidates"]])
-    base, tips, z, v, r, base_full = coordinates(s.values, s.fs_hz)
     tr = indices(d.train)
     _plot_portraits(folder / "residual_portraits.png",
                     [(f"tip {i + 1}", z[tr, i], v[tr, i], r[tr, i] - _beam_rhs(d.nominal, i, z[tr], v[tr],
