@@ -42,7 +42,7 @@ def run(args) -> int:
     import numpy as np
 
     from .config import load_config
-    from .device import SimulatedDevice
+    from .sim.device import SimulatedDevice
     from .protocol import Decoder
 
     data = SimulatedDevice(load_config(None)).frames(400_000)  # 9.6 MB, 200 s of the rig
@@ -61,7 +61,7 @@ def run(args) -> int:
         out = Path(tmp) / "bench.mcap"
         # startup (imports, compiled kernels from cache) measured alone, then subtracted
         c_start, w_start = _timed([sys.executable, "-c", "import daq.cli, daq.driver, daq.recorder, "
-                                   "daq.transport, ident.rig; from ident.rig import simulate_rig, RigConfig; "
+                                   "daq.transport, daq.sim.rig; from daq.sim.rig import simulate_rig, RigConfig; "
                                    "simulate_rig(RigConfig(), 0.01)"])
         c_sim, w_sim = _timed(py + ["sim", "--duration", str(args.seconds)])
         c_rec, w_rec = _timed(py + ["record", "--sim", "--quiet", "--duration", str(args.seconds), "-o", str(out)])

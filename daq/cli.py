@@ -178,7 +178,7 @@ class LiveProcessing:
                  window_s: float = 4.0, hop_s: float = 1.0):
         import queue
 
-        from ident.pipeline import Pipeline, PipelineConfig, rolling_config
+        from ident.live.pipeline import Pipeline, PipelineConfig, rolling_config
 
         from .eventlog import JsonlEvents
         from .viewer import RerunViewer

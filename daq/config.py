@@ -1,4 +1,4 @@
-"""The tool's YAML config: the simulated rig (``ident.rig.RigConfig``) plus the ``daq`` section.
+"""The tool's YAML config: the simulated rig (``daq.sim.rig.RigConfig``) plus the ``daq`` section.
 
 One file, validated key by key; any error names the file, the key and what is
 allowed (ident.config.build).
@@ -12,8 +12,8 @@ from pathlib import Path
 import yaml
 
 from ident.config import build, to_mapping
-from ident.rig import RigConfig
-from ident.sensors import CHANNELS
+from .sim.rig import RigConfig
+from .sim.sensors import CHANNELS
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,7 @@ from pathlib import Path
 import serial
 
 from .config import Config
-from .device import SimulatedDevice
+from .sim.device import SimulatedDevice
 
 TICK_S = 0.005
 TX_FIFO_BYTES = 64 * 1024

@@ -122,7 +122,7 @@ class RerunViewer:
                              recording=self.rec)
 
     def log_step(self, out) -> None:
-        """One pipeline StepOutput (ident.pipeline)."""
+        """One pipeline StepOutput (ident.live.pipeline)."""
         if self.rec is None or len(out.t) == 0:
             return
         rr = self.rr

@@ -169,7 +169,7 @@ def import_cmd(args) -> int:
     from daq.config import Config, DaqConfig
     from daq.driver import SampleBlock
     from daq.recorder import McapRecorder
-    from ident.rig import RigConfig
+    from daq.sim.rig import RigConfig
 
     from .sources import read_csv
 

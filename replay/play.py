@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ident.pipeline import Pipeline, PipelineConfig, StepOutput, rolling_config
+from ident.live.pipeline import Pipeline, PipelineConfig, StepOutput, rolling_config
 
 from .sources import Samples
 

@@ -19,7 +19,7 @@ def pytest_configure(config):
 
 @pytest.fixture(scope="session")
 def duffing():
-    from ident.duffing import duffing_data
+    from ident.paper.duffing import duffing_data
 
     return duffing_data()
 

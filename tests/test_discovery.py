@@ -7,8 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from ident.discovery import (HELD_OUT, HIDDEN, N_BLOCKS, Candidate, best_contact, contact_shape, discover,
-                             hidden_case, interleaved_split, nominal_params, simplest_of_best)
+from daq.sim.hidden import HIDDEN, hidden_case, nominal_params
+from ident.discovery import (HELD_OUT, N_BLOCKS, Candidate, best_contact, contact_shape, discover,
+                             interleaved_split, simplest_of_best)
 
 
 @pytest.fixture(scope="module")

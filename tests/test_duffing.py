@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ident.duffing import DuffingParams, coefficient_errors, embedding_study, noise_sweep, noisy_fit
+from ident.paper.duffing import DuffingParams, coefficient_errors, embedding_study, noise_sweep, noisy_fit
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from ident.duffing import DuffingParams
+from ident.paper.duffing import DuffingParams
 from ident.model import SindyModel
 
 

@@ -5,10 +5,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ident.excitation import Kick, Step
-from ident.regimes import RegimeConfig, RegimeMonitor, label_of
-from ident.rig import RigConfig, simulate_rig
-from ident.sensors import to_counts
+from daq.sim.excitation import Kick, Step
+from ident.live.regimes import RegimeConfig, RegimeMonitor, label_of
+from daq.sim.rig import RigConfig, simulate_rig
+from daq.sim.sensors import to_counts
 
 FS = 2000.0
 

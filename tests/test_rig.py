@@ -7,8 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ident.excitation import Excitation, Kick
-from ident.rig import RigConfig, RigParams, RigSimulator, simulate_measured_base, simulate_rig
+from daq.sim.excitation import Excitation, Kick
+from daq.sim.rig import RigConfig, RigSimulator, simulate_rig
+from ident.rig import RigParams, simulate_measured_base
 
 F_HZ = 12.3
 

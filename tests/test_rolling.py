@@ -5,11 +5,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ident.excitation import Excitation
+from daq.sim.excitation import Excitation
 from ident.physical import integrate_band
-from ident.rig import RigConfig, RigParams, simulate_rig
-from ident.rolling import RollingConfig, RollingIdentifier
-from ident.sensors import to_counts
+from daq.sim.rig import RigConfig, simulate_rig
+from ident.rig import RigParams
+from ident.live.rolling import RollingConfig, RollingIdentifier
+from daq.sim.sensors import to_counts
 
 
 def test_band_limited_integration_of_a_sine():

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from ident.duffing import DuffingParams, coefficient_errors
+from ident.paper.duffing import DuffingParams, coefficient_errors
 from ident.library import PolynomialForcingLibrary
 from ident.sindy import identify, refine, sweep
 

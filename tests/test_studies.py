@@ -1,4 +1,4 @@
-"""The paper's experimental studies on the example recordings (ident.studies, ident fit)."""
+"""The paper's experimental studies on the example recordings (ident.paper.studies, ident fit)."""
 
 import json
 import subprocess
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident.studies import run_study
+from ident.paper.studies import run_study
 from replay.sources import read_mcap
 
 REC = Path(__file__).resolve().parents[1] / "recordings"

@@ -13,7 +13,7 @@ import urllib.parse
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from ..config import load_config
-from ..device import SimulatedDevice
+from ..sim.device import SimulatedDevice
 from ..protocol import FRAME_LEN
 
 FAST_READ_FRAMES = 100  # frames a read finds waiting when not paced in real time

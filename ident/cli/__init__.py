@@ -1,7 +1,8 @@
-"""Command line of ``ident``: the I/O edge of the science package.
+"""The command lines' shared plumbing: one-line usage errors, bad input as one line and exit code 2.
 
-Every ValueError or OSError raised by bad input becomes one line on stderr and
-exit code 2; argparse's own errors are folded into one line too.
+``ident.cli`` is the I/O edge of the science package: the ``ident`` command (``ident.cli.main``) and
+its subcommands live here, and only here may ``ident`` compose other packages' readers. ``daq`` and
+``replay`` use this module's two helpers for their own commands.
 """
 
 from __future__ import annotations
@@ -28,26 +29,3 @@ def run_guarded(prog: str, func: Callable[[argparse.Namespace], int], args: argp
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
-
-
-def build_parser() -> argparse.ArgumentParser:
-    from . import bench, discover, duffing_report, fit
-
-    parser = OneLineParser(prog="ident", description="SINDy identification of forced vibrations "
-                           "(Lubricants 2019, 7(8), 64)")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
-    duffing_report.add_parser(sub)
-    fit.add_parser(sub)
-    discover.add_parser(sub)
-    bench.add_parser(sub)
-    return parser
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    return run_guarded(f"ident {args.command}", args.func, args)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -15,8 +15,16 @@ noisy machine. Run it alone: the compiled kernel uses both cores.
 from __future__ import annotations
 
 import time
+from collections import Counter
 
 import numpy as np
+from daq.sim.hidden import HIDDEN, hidden_case
+
+from ..derivatives import smooth
+from ..discovery import discover
+from ..library import PolynomialForcingLibrary
+from ..paper.duffing import denoise_window, duffing_data
+from ..sindy import sweep
 
 
 TOLERANCE = 0.5  # the same selection rule as ident.sindy.sweep's default
@@ -70,10 +78,6 @@ def run(args) -> int:
 
 def run_discovery(n_cases: int) -> int:
     """Seeded hidden-effect cases: confusion table of true against named effect, parameter errors, gains."""
-    from collections import Counter
-
-    from ..discovery import HIDDEN, discover, hidden_case
-
     conf: Counter = Counter()
     perr: dict[str, list[float]] = {}
     gains: dict[str, list[float]] = {}
@@ -109,11 +113,6 @@ def run_discovery(n_cases: int) -> int:
 
 
 def run_sweep(args) -> int:
-    from ..derivatives import smooth
-    from ..duffing import denoise_window, duffing_data
-    from ..library import PolynomialForcingLibrary
-    from ..sindy import sweep
-
     d = duffing_data()
     rng = np.random.default_rng([0, 8])
     xn = d.x + 0.08 * rng.standard_normal(d.x.shape)

@@ -76,10 +76,12 @@ def _load(args):
 
 
 def _model(path: Path):
+    """The rig model (``ident.rig.RigParams``) from a YAML file: its ``rig`` section; the rest of a
+    daq config (shaker programme, sensors, daq) is the simulated device's and is ignored here."""
     import yaml
 
     from ..config import build
-    from ..rig import RigConfig
+    from ..rig import RigParams
 
     try:
         data = yaml.safe_load(path.read_text())
@@ -87,9 +89,9 @@ def _model(path: Path):
         raise ValueError(f"{path}: model file not found") from None
     except yaml.YAMLError as exc:
         raise ValueError(f"{path}: not valid YAML: {exc}") from None
-    if isinstance(data, dict):
-        data = {k: v for k, v in data.items() if k != "daq"}  # a daq config file is accepted as is
-    return build(RigConfig, data, str(path)).rig
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: a rig model file is a mapping with a 'rig' section")
+    return build(RigParams, data.get("rig"), str(path), "rig")
 
 
 def _clean(v):

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..duffing import DEFAULT_ETAS, QUICK_ETAS, run_study
+from ..paper.duffing import DEFAULT_ETAS, QUICK_ETAS, run_study
 
 TERMS_D = ["1", "x1", "x2", "x1^2", "x1 x2", "x2^2", "x1^3", "x1^2 x2", "x1 x2^2", "x2^3", "F"]
 

@@ -1,7 +1,7 @@
 """``ident fit FILE``: batch identification of a recording, the paper's experimental studies 1-3.
 
 Reads the recording with replay's readers (a command line may compose any
-package's readers), runs ident.studies on a steady segment, prints the
+package's readers), runs ident.paper.studies on a steady segment, prints the
 equations and writes the coefficient tables and figures like the paper's
 Tables 4-7 and Figs. 9-12.
 """
@@ -12,6 +12,9 @@ import json
 from pathlib import Path
 
 import numpy as np
+from replay.sources import open_samples
+
+from ..paper.studies import run_study
 
 
 def add_parser(sub) -> None:
@@ -33,10 +36,6 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from replay.sources import open_samples
-
-    from ..studies import run_study
-
     kw = {}
     if Path(args.file).suffix.lower() == ".csv":
         kw = {"time_col": args.time_col, "fs_hz": args.fs_hz}

@@ -28,11 +28,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .derivatives import differentiate, smooth
-from .embedding import acf_delay, embed
-from .metrics import error_percent, nrmse, snr_db
-from .model import SindyModel
-from .sindy import Identification, identify
+from ..derivatives import differentiate, smooth
+from ..embedding import acf_delay, embed
+from ..metrics import error_percent, nrmse, snr_db
+from ..model import SindyModel
+from ..sindy import Identification, identify
 
 
 @dataclass(frozen=True)

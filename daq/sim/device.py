@@ -3,7 +3,7 @@
 Like python-can's virtual bus, this is a first-class device, not a test
 double: ``daq sim`` serves it on a pty, ``rig://`` serves it to pyserial in
 process, and ``daq record`` uses it when no port is given. The firmware
-samples the three accelerometers at ``rate_hz``, quantises them (ident.sensors),
+samples the three accelerometers at ``rate_hz``, quantises them (daq.sim.sensors),
 stamps each frame with its sequence number and its own clock (which may
 drift), and streams frames; faults are injected into the byte stream on demand.
 """
@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident.rig import RigSimulator
-from ident.sensors import to_counts
+from .rig import RigSimulator
+from .sensors import to_counts
 
-from .config import Config
-from .protocol import FLAG_CLIPPED, encode
+from ..config import Config
+from ..protocol import FLAG_CLIPPED, encode
 
 
 class SimulatedDevice:

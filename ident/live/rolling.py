@@ -27,12 +27,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .filters import lowpass_zero_phase
-from .library import PolynomialForcingLibrary
-from .model import SindyModel
-from .physical import edge_samples, integrate_band
-from .sindy import integration_errors, refine, sweep
-from .simulate import simulate
+from ..filters import lowpass_zero_phase
+from ..library import PolynomialForcingLibrary
+from ..model import SindyModel
+from ..physical import edge_samples, integrate_band
+from ..sindy import integration_errors, refine, sweep
+from ..simulate import simulate
 
 
 @dataclass(frozen=True)

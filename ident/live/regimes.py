@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.signal import sosfilt
 
-from .filters import design_highpass, design_lowpass
+from ..filters import design_highpass, design_lowpass
 
 LABELS = ("linear", "localized-1", "localized-2", "impacting-both")
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .filters import design_lowpass, lowpass_block, lowpass_start
+from ..filters import design_lowpass, lowpass_block, lowpass_start
 from .regimes import RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow
 from .rolling import RollingConfig, RollingIdentifier, WindowFit
 

@@ -22,11 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .derivatives import differentiate
-from .embedding import acf_delay, delay_embed, fnn_dimension
-from .filters import lowpass_zero_phase
-from .metrics import error_percent, nrmse
-from .sindy import Identification, identify
+from ..derivatives import differentiate
+from ..embedding import acf_delay, delay_embed, fnn_dimension
+from ..filters import lowpass_zero_phase
+from ..metrics import error_percent, nrmse
+from ..sindy import Identification, identify
 
 STUDIES = {
     1: {"title": "no impact, one blade, 2-D embedding", "signals": (0,), "dimension": 2, "degrees": (1, 2),

@@ -1,0 +1,1 @@
+"""One processing stage for live acquisition and replay: the 50 Hz filter, the regime monitor, rolling SINDy."""
