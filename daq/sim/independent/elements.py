@@ -6,7 +6,10 @@ Phi^T b f. Forces are positive along +u.
 
 - Contact (a stopper with a gap g; Hunt and Crossley, J. Appl. Mech. 42, 1975, with a linear spring):
   penetration p = u - g (positive side) or -u - g (negative side); while p > 0 the stopper pushes with
-  k p + c p', and only pushes (compressive only): f = -max(0, k p + c p') on the positive side.
+  k p + lambda p p', and only pushes (compressive only): f = -max(0, k p + lambda p p') on the positive
+  side. The damping grows with the penetration, so the force is continuous at the impact; with
+  lambda = 3 (1 - e) k / (2 v) an impact at velocity v rebounds with a restitution coefficient of about e
+  (ibid., eq. 17).
 - Cubic spring: f = -k3 u^3 (hardening k3 > 0, softening k3 < 0).
 - Hysteretic (parallel Jenkins elements, each a spring k_j in series with a slider of slip force F_j;
   Iwan, J. Appl. Mech. 33, 1966; Segalman, J. Appl. Mech. 72, 2005): f = -sum_j clip(k_j (u - z_j), F_j)
@@ -36,7 +39,7 @@ class Contact:
     coordinate: np.ndarray
     gap_m: float
     stiffness_n_per_m: float
-    damping_n_s_per_m: float
+    damping_n_s_per_m2: float  # Hunt-Crossley lambda
     side: str = "both"
 
     def __post_init__(self):
@@ -44,6 +47,11 @@ class Contact:
             raise ValueError(f"side must be one of {tuple(SIDES)}")
         if self.gap_m < 0:
             raise ValueError("gap_m must be >= 0")
+
+
+def hunt_crossley_damping(stiffness_n_per_m: float, restitution: float, velocity_m_s: float) -> float:
+    """lambda (N s/m^2) giving a restitution coefficient of about `restitution` at `velocity_m_s`."""
+    return 3.0 * (1.0 - restitution) * stiffness_n_per_m / (2.0 * velocity_m_s)
 
 
 @dataclass
@@ -92,7 +100,7 @@ def pack(elements: list[Element], project) -> tuple[np.ndarray, ...]:
     for i, e in enumerate(elements):
         if isinstance(e, Contact):
             kinds[i] = CONTACT
-            par[i] = (e.gap_m, e.stiffness_n_per_m, e.damping_n_s_per_m, SIDES[e.side])
+            par[i] = (e.gap_m, e.stiffness_n_per_m, e.damping_n_s_per_m2, SIDES[e.side])
         elif isinstance(e, Cubic):
             kinds[i] = CUBIC
             par[i, 0] = e.k3_n_per_m3
