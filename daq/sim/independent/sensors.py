@@ -80,21 +80,49 @@ class Acquired:
     info: dict
 
 
-def sample_indices(rate_hz: int, fs_hz: int, n_out: int) -> np.ndarray:
-    if rate_hz % fs_hz:
-        raise ValueError("the internal rate must be a multiple of the output rate")
-    return np.arange(n_out) * (rate_hz // fs_hz)
+class Sampler:
+    """The card's anti-alias filter and sampling of one channel, streamed over consecutive chunks.
+
+    Each chunk is the physical signal at the internal rate; chunks after the first start with the last
+    sample of the previous one (a simulation's final state), which is skipped. The channel's sensor noise
+    (white at the internal rate, before the filter) is filtered and sampled alongside.
+    """
+
+    def __init__(self, card: Card, rate_hz: int, rng: np.random.Generator):
+        if rate_hz % card.fs_hz:
+            raise ValueError("the internal rate must be a multiple of the output rate")
+        self.decimation = rate_hz // card.fs_hz
+        self.sos = card.anti_alias.sos(rate_hz)
+        self.zi_signal = np.zeros((self.sos.shape[0], 2))
+        self.zi_noise = np.zeros((self.sos.shape[0], 2))
+        self.rng = rng
+        self.next_index = 0  # index within the next chunk (after skipping) of the next output sample
+        self.started = False
+        self.signal: list[np.ndarray] = []
+        self.noise: list[np.ndarray] = []
+
+    def push(self, chunk: np.ndarray) -> None:
+        x = chunk[1:] if self.started else chunk
+        self.started = True
+        y, self.zi_signal = scipy.signal.sosfilt(self.sos, x, zi=self.zi_signal)
+        w, self.zi_noise = scipy.signal.sosfilt(self.sos, self.rng.normal(size=len(x)), zi=self.zi_noise)
+        idx = np.arange(self.next_index, len(x), self.decimation)
+        self.signal.append(y[idx])
+        self.noise.append(w[idx])
+        self.next_index = int(idx[-1] + self.decimation - len(x)) if len(idx) else self.next_index - len(x)
+
+    def sampled(self, n_out: int) -> tuple[np.ndarray, np.ndarray]:
+        """(filtered signal, filtered unit noise) at the output rate, the first n_out samples."""
+        y, w = np.concatenate(self.signal), np.concatenate(self.noise)
+        if len(y) < n_out:
+            raise ValueError(f"only {len(y)} samples for {n_out}")
+        return y[:n_out], w[:n_out]
 
 
-def acquire(signal: np.ndarray, rate_hz: int, card: Card, channel: Channel, n_out: int,
-            rng: np.random.Generator) -> Acquired:
-    """The channel's record of a physical signal given at rate_hz (at least n_out output samples long)."""
-    sos = card.anti_alias.sos(rate_hz)
-    idx = sample_indices(rate_hz, card.fs_hz, n_out)
-    y = scipy.signal.sosfilt(sos, signal)[idx]
-    w = scipy.signal.sosfilt(sos, rng.normal(size=len(signal)))[idx]
+def digitise(y: np.ndarray, w: np.ndarray, card: Card, channel: Channel) -> Acquired:
+    """Noise scaled to the channel's SNR, sign and gain, range, clipping and quantisation."""
     rms = float(np.sqrt(np.mean(y**2)))
-    w *= rms * 10 ** (-channel.snr_db / 20) / np.sqrt(np.mean(w**2))
+    w = w * rms * 10 ** (-channel.snr_db / 20) / np.sqrt(np.mean(w**2))
     scale = channel.sign * channel.gain
     clean = scale * y
     full_range = channel.headroom * float(np.max(np.abs(clean)))
@@ -107,3 +135,11 @@ def acquire(signal: np.ndarray, rate_hz: int, card: Card, channel: Channel, n_ou
             "sign": channel.sign, "gain": channel.gain, "range": full_range, "bits": card.bits,
             "step": step, "clipped_fraction": float(np.mean(np.abs(scale * (y + w)) > full_range))}
     return Acquired(values=values, clean=clean, info=info)
+
+
+def acquire(signal: np.ndarray, rate_hz: int, card: Card, channel: Channel, n_out: int,
+            rng: np.random.Generator) -> Acquired:
+    """The channel's record of a physical signal given at rate_hz (at least n_out output samples long)."""
+    sampler = Sampler(card, rate_hz, rng)
+    sampler.push(signal)
+    return digitise(*sampler.sampled(n_out), card, channel)
