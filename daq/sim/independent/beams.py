@@ -42,6 +42,12 @@ class BeamSpec:
     support: str = "cantilever"
     root_stiffness_n_m_per_rad: float | None = None  # None: rigid clamp; else a rotational root joint
 
+    def describe(self) -> dict:
+        return {"length_m": self.length_m, "width_m": self.width_m, "thickness_m": self.thickness_m,
+                "youngs_pa": self.youngs_pa, "density_kg_m3": self.density_kg_m3, "n_elements": self.n_elements,
+                "tip_mass_kg": self.tip_mass_kg, "tip_inertia_kg_m2": self.tip_inertia_kg_m2,
+                "support": self.support, "root_stiffness_n_m_per_rad": self.root_stiffness_n_m_per_rad}
+
     @property
     def area_m2(self) -> float:
         return self.width_m * self.thickness_m

@@ -52,18 +52,25 @@ class Segment:
 
 @dataclass
 class Programme(Signal):
-    """Sine through segments; each segment's first transition_s blends from the previous one."""
+    """Sine through segments; each segment's first transition_s blends from the previous one.
+
+    The programme starts from initial_frequency_hz (default: the first segment's), initial_amplitude and
+    phase_rad, so that consecutive programmes join smoothly (see final_phase_rad).
+    """
 
     segments: list[Segment]
     transition_s: float = 1.0
     phase_rad: float = 0.0
+    initial_frequency_hz: float | None = None
+    initial_amplitude: float = 0.0
 
-    def sample(self, rate_hz: float, n: int) -> np.ndarray:
+    def _phase_amplitude(self, rate_hz: float, n: int) -> tuple[np.ndarray, np.ndarray]:
         t = _times(rate_hz, n)
-        freq = np.full(n, self.segments[0].frequency_hz)
-        amp = np.zeros(n)
+        prev_f = self.segments[0].frequency_hz if self.initial_frequency_hz is None else self.initial_frequency_hz
+        prev_a = self.initial_amplitude
+        freq = np.full(n, prev_f)
+        amp = np.full(n, prev_a)
         start = 0.0
-        prev_f, prev_a = self.segments[0].frequency_hz, 0.0
         for seg in self.segments:
             w = raised_cosine((t - start) / self.transition_s)
             inside = t >= start
@@ -71,15 +78,24 @@ class Programme(Signal):
             amp[inside] = (prev_a + (seg.amplitude - prev_a) * w)[inside]
             start += seg.duration_s
             prev_f, prev_a = seg.frequency_hz, seg.amplitude
-        amp[t >= start] = 0.0
         phase = self.phase_rad + 2 * np.pi * np.concatenate(([0.0], np.cumsum(0.5 * (freq[1:] + freq[:-1])))) / rate_hz
+        return phase, amp
+
+    def sample(self, rate_hz: float, n: int) -> np.ndarray:
+        phase, amp = self._phase_amplitude(rate_hz, n)
         return amp * np.sin(phase)
+
+    def final_phase_rad(self, rate_hz: float, n: int) -> float:
+        """The phase at the last of n samples, to start the next programme from."""
+        return float(self._phase_amplitude(rate_hz, n)[0][-1] % (2 * np.pi))
 
     def boundaries_s(self) -> list[float]:
         return list(np.cumsum([0.0] + [s.duration_s for s in self.segments]))
 
     def describe(self) -> dict:
         return {"type": "programme", "transition_s": self.transition_s,
+                "initial_frequency_hz": self.initial_frequency_hz,
+                "initial_amplitude": self.initial_amplitude,
                 "segments": [{"duration_s": s.duration_s, "frequency_hz": s.frequency_hz,
                               "amplitude": s.amplitude} for s in self.segments]}
 
