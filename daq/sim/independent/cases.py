@@ -11,8 +11,9 @@ times the linear modal damping near the peak, ...), then runs the record with th
 The truth's `effect_strength` is RMS(f_nl) / RMS(k_static u) over the record, f_nl the element's force
 (for a joint: its departure from the stuck joint; for membrane stretching: its generalised force on mode
 1, against omega_1^2 q_1), u the effect's coordinate and k_static the linear structure's static stiffness
-on that coordinate; `effect_vs_damping` (dissipative causes) is RMS(f_nl) / RMS(c_1 u'), c_1 the first
-mode's linear damping seen on the coordinate.
+on that coordinate; `effect_vs_damping` (friction, drag) is RMS(f_nl) / RMS(c_ref u'), with
+c_ref = 2 zeta_1 k_static / omega_rms the viscous damping at the first mode's damping ratio on the
+coordinate (omega_rms = RMS(u') / RMS(u) in the linear preview).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import numpy as np
 
 from . import draws
 from .beams import BeamSpec
-from .elements import Contact, Cubic, Drag, Element, Hysteretic
+from .elements import Contact, Cubic, Drag, Element, Hysteretic, hunt_crossley_damping
 from .excitation import Hammer, Hit, LinearGain, Scaled, Signal, Sweep, band_random, hammer_hit, odd_multisine
 from .experiment import Drive, Run, Setup, base_velocity, run
 from .integrate import Coil, Output
@@ -64,10 +65,6 @@ class Site:
     @property
     def phi_effect(self) -> float:
         return float(self.coordinate @ self.mode)
-
-    @property
-    def modal_mass_at_effect(self) -> float:
-        return 1.0 / self.phi_effect**2
 
 
 @dataclass
@@ -155,7 +152,7 @@ def _rig_draft(rng: np.random.Generator, family: str, cause: str) -> Draft:
         n_j = int(rng.integers(12, 21))
         joint = (stuck, np.full(n_j, rng.uniform(0.4, 0.8) * stuck / n_j))
     structure = {
-        "beams": [_beam_truth(b) for b in beams], **beams_info,
+        "beams": [b.describe() for b in beams], **beams_info,
         "modal_damping_ratios_alone": [list(z[:4]) for z in rig.spec.zetas],
         "coupling": {"x_m": list(rig.spec.coupling_x_m), "stiffness_n_per_m": rig.spec.coupling_n_per_m,
                      "damping_n_s_per_m": rig.spec.coupling_n_s_per_m},
@@ -164,7 +161,8 @@ def _rig_draft(rng: np.random.Generator, family: str, cause: str) -> Draft:
         st = rig.spec.stinger
         omega, _, mode = rig.first_mode(st.beam)
         structure["stinger"] = {"beam": st.beam + 1, "x_m": st.x_m, "cell_mass_kg": st.cell_mass_kg,
-                                "force_ratio_at_tip": float(rig.point(st.beam, st.x_m) @ mode / (rig.tip(st.beam) @ mode))}
+                                "force_ratio_at_tip": float((rig.point(st.beam, st.x_m) @ mode)
+                                                            / (rig.tip(st.beam) @ mode))}
         if st.shaker is not None:
             structure["shaker"] = vars(st.shaker)
     d = Draft(family=family, fs_hz=fs, duration_s=duration, setup=setup, scaled=[drives[0].name],
@@ -179,13 +177,6 @@ def _rig_draft(rng: np.random.Generator, family: str, cause: str) -> Draft:
                                Hammer([Hit(b["time_s"], b["peak_force_n"], b["width_s"])]))
                          for i, b in enumerate(d.blows)]
     return d
-
-
-def _beam_truth(b: BeamSpec) -> dict:
-    return {"length_m": b.length_m, "width_m": b.width_m, "thickness_m": b.thickness_m,
-            "youngs_pa": b.youngs_pa, "density_kg_m3": b.density_kg_m3, "tip_mass_kg": b.tip_mass_kg,
-            "tip_inertia_kg_m2": b.tip_inertia_kg_m2, "n_elements": b.n_elements, "support": b.support,
-            "root_joint_n_m_per_rad": b.root_stiffness_n_m_per_rad}
 
 
 def _draw_blows(rng: np.random.Generator, rig: Rig, duration: float, target_m: float) -> list[dict]:
@@ -235,7 +226,8 @@ def _duffing_draft(rng: np.random.Generator, cause: str) -> Draft:
                 k_static=mass * omega**2, location=None if cause == "none" else "x1", position={"at": "mass"})
     return Draft(family="duffing", fs_hz=fs, duration_s=duration, setup=setup, scaled=["force"],
                  target_m=rng.uniform(0.5e-3, 2e-3), site=site, channels=[("force", "force"), ("x1", "displacement")],
-                 excitation="force:force", structure={"mass_kg": mass, "natural_frequency_hz": f0, "damping_ratio": zeta},
+                 excitation="force:force",
+                 structure={"mass_kg": mass, "natural_frequency_hz": f0, "damping_ratio": zeta},
                  signal_kind=kind, min_rate_hz=10 * fs)
 
 
@@ -300,7 +292,7 @@ def _cc_beam_draft(rng: np.random.Generator, cause: str) -> Draft:
     site = Site(coordinate=b, sensor=b, mode=mode, omega=float(model.omega_rad_s[0]), zeta=float(zetas[0]),
                 k_static=1.0 / beam.structure.static_compliance(b), location=None if cause == "none" else "v1",
                 position={"at": "distributed (membrane stretching)", "hit_x_m": x_hit, "sensor_x_m": x_hit})
-    truth = {"beam": _beam_truth(spec), "natural_frequencies_hz": list(model.frequencies_hz),
+    truth = {"beam": spec.describe(), "natural_frequencies_hz": list(model.frequencies_hz),
              "modal_damping_ratios": list(zetas[:model.n_modes]), "hit_time_s": t_hit, "hit_x_m": x_hit,
              "axial_stiffness_ea_n": e_pa * spec.area_m2}
     return Draft(family="cc_beam", fs_hz=fs, duration_s=duration, setup=setup, scaled=["force"], target_m=0.0,
@@ -322,8 +314,7 @@ def _membrane_k3_per_mass(draft: Draft) -> float:
 
 
 def _spec_from_truth(b: dict) -> BeamSpec:
-    return BeamSpec(b["length_m"], b["width_m"], b["thickness_m"], b["youngs_pa"], b["density_kg_m3"],
-                    n_elements=b["n_elements"], support=b["support"])
+    return BeamSpec(**b)
 
 
 def _draw_effect(rng: np.random.Generator, cause: str, draft: Draft, stats: dict,
@@ -331,19 +322,19 @@ def _draw_effect(rng: np.random.Generator, cause: str, draft: Draft, stats: dict
     """(elements, physical parameters for the truth, generic parameters for the equivalents)."""
     site = draft.site
     u_peak = max(stats["u_pos"], stats["u_neg"])
-    m_e = site.modal_mass_at_effect
-    k1_e = m_e * site.omega**2
-    c1_e = 2 * site.zeta * site.omega * m_e
+    c_ref = _linear_damping(site, stats)
     if cause == "contact":
         side = draws.pick(rng, {"both": 0.5, "positive": 0.25, "negative": 0.25})
         reach = {"both": min(stats["u_pos"], stats["u_neg"]), "positive": stats["u_pos"],
                  "negative": stats["u_neg"]}[side]
         gap = rng.uniform(0.45, 0.85) * min(reach, 2.5 * stats["u_rms"]) / strength
         k = draws.log_uniform(rng, 2, 1000) * site.k_static
-        c = rng.uniform(0.02, 0.1) * 2 * math.sqrt(k * m_e)
-        p = {"gap_m": gap, "side": side, "stiffness_n_per_m": k, "damping_n_s_per_m": c,
+        restitution = rng.uniform(0.6, 0.9)
+        lam = hunt_crossley_damping(k, restitution, stats["v_peak"])
+        p = {"gap_m": gap, "side": side, "stiffness_n_per_m": k, "damping_n_s_per_m2": lam,
+             "restitution": restitution, "restitution_at_m_s": stats["v_peak"],
              "stiffness_ratio_to_static": k / site.k_static}
-        return [Contact(site.coordinate, gap, k, c, side)], p, p
+        return [Contact(site.coordinate, gap, k, lam, side)], p, p
     if cause == "cubic_stiffness":
         soft = draft.family == "chain" and rng.uniform() < 0.5
         eta = (rng.uniform(0.03, 0.12) if soft else rng.uniform(0.1, 0.5)) * strength
@@ -351,12 +342,12 @@ def _draw_effect(rng: np.random.Generator, cause: str, draft: Draft, stats: dict
         p = {"k3_n_per_m3": k3, "kind": "softening" if soft else "hardening"}
         return [Cubic(site.coordinate, k3)], p, p
     if cause == "coulomb_friction":
-        slip = rng.uniform(0.5, 2.0) * strength * 0.5 * np.pi * site.zeta * k1_e * math.sqrt(2) * stats["u_rms"]
+        slip = rng.uniform(0.5, 2.0) * strength * c_ref * np.pi * stats["omega_rms"] * math.sqrt(2) * stats["u_rms"] / 4
         kt = draws.log_uniform(rng, 10, 50) * site.k_static
         p = {"slip_force_n": slip, "tangential_stiffness_n_per_m": kt}
         return [Hysteretic(site.coordinate, np.array([kt]), np.array([slip]), stuck_in_linear_model=False)], p, p
     if cause == "quadratic_damping":
-        c_q = rng.uniform(0.5, 2.0) * strength * c1_e * 3 * np.pi / (8 * math.sqrt(2) * stats["v_rms"])
+        c_q = rng.uniform(0.5, 2.0) * strength * c_ref * 3 * np.pi / (8 * math.sqrt(2) * stats["v_drag_rms"])
         p = {"coefficient_n_s2_per_m2": c_q, "velocity": "absolute" if draft.absolute_drag else "relative"}
         return [Drag(site.coordinate, c_q, absolute=draft.absolute_drag)], p, p
     if cause == "friction_joint":
@@ -380,10 +371,16 @@ def _preview(draft: Draft) -> dict:
     linear = replace(setup, elements=probes, membrane=None)
     r = run(linear, draft.fs_hz, draft.duration_s, rate_hz=linear.rate_hz(draft.fs_hz, draft.min_rate_hz))
     u, v, s = r.response.element_u[:, 0], r.response.element_v[:, 0], r.response.element_u[:, 1]
-    if draft.absolute_drag:
-        v = v + _base_velocity(r, setup)
+    v_drag = v + _base_velocity(r, setup) if draft.absolute_drag else v
     return {"u_pos": float(u.max()), "u_neg": float(-u.min()), "u_rms": _rms(u), "v_peak": float(np.abs(v).max()),
-            "v_rms": _rms(v), "sensor_peak": float(np.abs(s).max())}
+            "v_rms": _rms(v), "v_drag_rms": _rms(v_drag), "omega_rms": _rms(v) / _rms(u),
+            "sensor_peak": float(np.abs(s).max())}
+
+
+def _linear_damping(site: Site, stats: dict) -> float:
+    """c_ref = 2 zeta_1 k_static / omega_rms: viscous damping at the first mode's ratio on the coordinate
+    (k_static its static stiffness, omega_rms = RMS(u') / RMS(u) its motion's RMS frequency)."""
+    return 2 * site.zeta * site.k_static / stats["omega_rms"]
 
 
 def _base_velocity(r: Run, setup: Setup) -> np.ndarray:
@@ -399,7 +396,7 @@ def _finish(rng: np.random.Generator, draft: Draft, cause: str, seed: int) -> Ca
     else:
         target = draft.target_m
     gain = target / stats["sensor_peak"]
-    stats = {k: v * gain for k, v in stats.items()}
+    stats = {k: v if k == "omega_rms" else v * gain for k, v in stats.items()}  # the preview is linear
     drives = [replace(d, signal=Scaled(d.signal, gain)) if d.name in draft.scaled else d for d in draft.setup.drives]
     setup = replace(draft.setup, drives=drives + draft.blow_drives)
     strength = 1.0
@@ -450,7 +447,8 @@ def _truth(draft: Draft, cause: str, params: dict, generic: dict, r: Run, stats:
         k3pm = _membrane_k3_per_mass(draft)
         m_eq = 1 / site.phi_sensor**2
         truth["equivalent"] |= {"k3_n_per_m3": k3pm * m_eq, "k3_per_mass": k3pm}
-        truth["effect"] = {"kind": "membrane stretching", "axial_coefficient_ea_over_2l_n": draft.setup.membrane.coefficient_n,
+        truth["effect"] = {"kind": "membrane stretching",
+                           "axial_coefficient_ea_over_2l_n": draft.setup.membrane.coefficient_n,
                            "predicted_backbone_shift_at_preview_peak": draft.membrane_target_shift}
         f, q1 = resp.element_f[:, -1], resp.element_u[:, -1]
         truth["effect_strength"] = _rms(f) / _rms(site.omega**2 * q1)
@@ -458,8 +456,7 @@ def _truth(draft: Draft, cause: str, params: dict, generic: dict, r: Run, stats:
         f, u, v = resp.element_f[:, 0], resp.element_u[:, 0], resp.element_v[:, 0]
         truth["effect_strength"] = _rms(f) / _rms(site.k_static * u)
         if cause in ("coulomb_friction", "quadratic_damping"):
-            c1 = 2 * site.zeta * site.omega * site.modal_mass_at_effect
-            truth["effect_vs_damping"] = _rms(f) / _rms(c1 * v)
+            truth["effect_vs_damping"] = _rms(f) / _rms(_linear_damping(site, stats) * v)
         if cause == "contact":
             truth["contact_share"] = float(np.mean(f != 0.0))
     else:

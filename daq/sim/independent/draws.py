@@ -4,8 +4,8 @@ the excitation programmes, and the equivalent single-DOF parameters of an effect
 Equivalent parameters (first-mode reduction; Ewins, Modal Testing, 2nd ed., 2000, sec. 2.3): with the
 mass-normalised first mode phi, a sensor coordinate s and an effect coordinate e, the mode normalised to
 1 at the sensor has modal mass m_eq = 1 / phi_s^2 and stiffness m_eq omega_1^2; with r = phi_e / phi_s
-an element on e seen at the sensor has gap g / |r|, stiffness k r^2, cubic coefficient k3 r^4, slip
-force F |r|, quadratic damping c |r|^3 (side flipped when r < 0).
+an element on e seen at the sensor has gap g / |r|, stiffness k r^2, Hunt-Crossley damping lambda |r|^3,
+cubic coefficient k3 r^4, slip force F |r|, quadratic damping c |r|^3 (side flipped when r < 0).
 """
 
 from __future__ import annotations
@@ -167,7 +167,7 @@ def draw_hammer_series(rng: np.random.Generator, duration_s: float) -> Hammer:
 
 PER_MASS = {  # equivalent parameter -> the same divided by m_eq (SI units per kg)
     "stiffness_n_per_m": "stiffness_per_mass", "damping_n_s_per_m": "damping_per_mass",
-    "contact_stiffness_n_per_m": "contact_stiffness_per_mass", "contact_damping_n_s_per_m": "contact_damping_per_mass",
+    "contact_stiffness_n_per_m": "contact_stiffness_per_mass", "contact_damping_n_s_per_m2": "contact_damping_per_mass",
     "k3_n_per_m3": "k3_per_mass", "slip_force_n": "slip_force_per_mass", "slip_force_min_n": "slip_force_min_per_mass",
     "tangential_stiffness_n_per_m": "tangential_stiffness_per_mass",
     "coefficient_n_s2_per_m2": "coefficient_per_mass", "joint_stiffness_n_per_m": "joint_stiffness_per_mass",
@@ -188,8 +188,9 @@ def equivalents(phi_sensor: float, phi_effect: float, omega: float, zeta: float,
         side = params["side"]
         if r < 0 and side != "both":
             side = "negative" if side == "positive" else "positive"
-        eq |= {"gap_m": params["gap_m"] / a, "side": side, "contact_stiffness_n_per_m": params["stiffness_n_per_m"] * r**2,
-               "contact_damping_n_s_per_m": params["damping_n_s_per_m"] * r**2}
+        eq |= {"gap_m": params["gap_m"] / a, "side": side,
+               "contact_stiffness_n_per_m": params["stiffness_n_per_m"] * r**2,
+               "contact_damping_n_s_per_m2": params["damping_n_s_per_m2"] * a**3}
     elif cause == "cubic_stiffness":
         eq |= {"k3_n_per_m3": params["k3_n_per_m3"] * r**4}
     elif cause == "coulomb_friction":

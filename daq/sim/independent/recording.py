@@ -67,7 +67,7 @@ def _write_new(path: Path, text: str) -> None:
 
 def _csv(columns: dict[str, np.ndarray]) -> str:
     names = list(columns)
-    data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
+    data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names]) + 0.0  # no "-0"
     lines = [",".join(names)]
     lines += [",".join(f"{v:.10g}" for v in row) for row in data]
     return "\n".join(lines) + "\n"
