@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.signal
 
 from .beams import BeamSpec, assemble_beam, strip_tip_inertia
 from .excitation import (Gate, Hammer, Programme, Segment, Signal, Sum, Sweep, band_random, hammer_hit,
@@ -115,9 +116,10 @@ def draw_rig(rng: np.random.Generator, beams: tuple[BeamSpec, BeamSpec], drive: 
 def draw_card(rng: np.random.Generator, fs_hz: int, bits: tuple[int, ...] = (12, 14, 16, 16, 16, 18, 24)) -> Card:
     if rng.uniform() < 0.6:
         aa = AntiAlias("butterworth", int(rng.integers(4, 9)), rng.uniform(0.36, 0.44) * fs_hz)
-    else:
-        aa = AntiAlias("elliptic", int(rng.choice([6, 8])), rng.uniform(0.38, 0.42) * fs_hz,
-                       passband_ripple_db=0.1, stopband_db=rng.uniform(60, 90))
+    else:  # the lowest order with the stopband (60-90 dB down) starting at the Nyquist frequency
+        edge, stop_db = rng.uniform(0.38, 0.42) * fs_hz, rng.uniform(60, 90)
+        order, _ = scipy.signal.ellipord(2 * np.pi * edge, 2 * np.pi * 0.5 * fs_hz, 0.1, stop_db, analog=True)
+        aa = AntiAlias("elliptic", int(order), edge, passband_ripple_db=0.1, stopband_db=stop_db)
     return Card(fs_hz=fs_hz, bits=int(rng.choice(bits)), anti_alias=aa)
 
 
