@@ -25,7 +25,7 @@ import numpy as np
 
 from . import draws
 from .beams import BeamSpec
-from .elements import Contact, Cubic, Drag, Element, Hysteretic, hunt_crossley_damping
+from .elements import Contact, Cubic, Drag, Element, Hysteretic, Membrane, hunt_crossley_damping
 from .excitation import Hammer, Hit, LinearGain, Scaled, Signal, Sweep, band_random, hammer_hit, odd_multisine
 from .experiment import Drive, Run, Setup, base_velocity, run
 from .integrate import Coil, Output
@@ -87,7 +87,8 @@ class Draft:
     absolute_drag: bool = False
     blows: list[dict] = field(default_factory=list)  # truth of the unmeasured blows
     blow_drives: list[Drive] = field(default_factory=list)  # added after the preview, never scaled
-    membrane_target_shift: float = 0.0
+    membrane: Membrane | None = None  # the clamped-clamped beam's (in the set-up unless the cause is none)
+    membrane_target_shift: float = 0.0  # backbone shift wanted at the preview's peak
 
 
 def _rms(x: np.ndarray) -> float:
@@ -281,7 +282,7 @@ def _cc_beam_draft(rng: np.random.Generator, cause: str) -> Draft:
     beam = clamped_clamped_beam(spec, zetas)
     fs = 10000
     model = reduce(beam.structure, 0.6 * fs, 6)
-    duration = float(rng.uniform(1.0, 5.0))
+    duration = float(rng.uniform(1.0, 10.0))
     x_hit = rng.uniform(0.25, 0.5) * length
     b = beam.model.point(x_hit)
     t_hit = rng.uniform(1e-3, 1e-2)
@@ -297,7 +298,7 @@ def _cc_beam_draft(rng: np.random.Generator, cause: str) -> Draft:
              "axial_stiffness_ea_n": e_pa * spec.area_m2}
     return Draft(family="cc_beam", fs_hz=fs, duration_s=duration, setup=setup, scaled=["force"], target_m=0.0,
                  site=site, channels=[("force", "force"), ("v1", "velocity")], excitation="force:force",
-                 structure=truth, signal_kind="hammer", min_rate_hz=10 * fs,
+                 structure=truth, signal_kind="hammer", min_rate_hz=10 * fs, membrane=beam.membrane,
                  membrane_target_shift=rng.uniform(0.02, 0.08))
 
 
@@ -306,15 +307,8 @@ def _cc_beam_draft(rng: np.random.Generator, cause: str) -> Draft:
 
 def _membrane_k3_per_mass(draft: Draft) -> float:
     """Single-mode cubic coefficient at the sensor of the membrane force: EA/(2L) G_11^2 / phi_s^2."""
-    setup = draft.setup
-    membrane = setup.membrane or clamped_clamped_beam(  # the "none" case has no membrane; same geometry
-        _spec_from_truth(draft.structure["beam"]), np.array([0.01])).membrane
-    g11 = draft.site.mode @ membrane.matrix @ draft.site.mode
-    return membrane.coefficient_n * g11**2 / draft.site.phi_sensor**2
-
-
-def _spec_from_truth(b: dict) -> BeamSpec:
-    return BeamSpec(**b)
+    g11 = draft.site.mode @ draft.membrane.matrix @ draft.site.mode
+    return draft.membrane.coefficient_n * g11**2 / draft.site.phi_sensor**2
 
 
 def _draw_effect(rng: np.random.Generator, cause: str, draft: Draft, stats: dict,
@@ -399,17 +393,18 @@ def _finish(rng: np.random.Generator, draft: Draft, cause: str, seed: int) -> Ca
     stats = {k: v if k == "omega_rms" else v * gain for k, v in stats.items()}  # the preview is linear
     drives = [replace(d, signal=Scaled(d.signal, gain)) if d.name in draft.scaled else d for d in draft.setup.drives]
     setup = replace(draft.setup, drives=drives + draft.blow_drives)
+    effect_seed = int(rng.integers(2**63))
+    u_bound = 10 * max(stats["u_pos"], stats["u_neg"])
     strength = 1.0
-    for _attempt in range(4):
-        elements, params, generic = _draw_effect(np.random.default_rng(rng.integers(2**63)), cause, draft, stats,
-                                                 strength)
+    for _attempt in range(4):  # a softening spring can escape: then the same effect, weakened
+        elements, params, generic = _draw_effect(np.random.default_rng(effect_seed), cause, draft, stats, strength)
         trial = replace(setup, elements=elements)
         rate = trial.rate_hz(draft.fs_hz, draft.min_rate_hz)
         r = run(trial, draft.fs_hz, draft.duration_s, rate_hz=rate)
-        sensor_peak = max(np.abs(r.outputs[c]).max() for c, _ in draft.channels)
-        if np.isfinite(sensor_peak) and all(np.isfinite(x).all() for x in r.outputs.values()):
+        u = r.response.element_u
+        if all(np.isfinite(x).all() for x in r.outputs.values()) and (not elements or np.abs(u).max() < u_bound):
             break
-        strength *= 0.5  # a softening spring escaped: weaken it
+        strength *= 0.5
     else:
         raise RuntimeError("the simulation diverged even with a weakened effect")
     truth = _truth(draft, cause, params, generic, r, stats, rate)
@@ -437,7 +432,7 @@ def _truth(draft: Draft, cause: str, params: dict, generic: dict, r: Run, stats:
     site = draft.site
     truth = {"cause": cause, "location": site.location, "position": site.position, "effect": params,
              "structure": draft.structure, "duration_s": r.n_out / draft.fs_hz, "n_samples": r.n_out,
-             "internal_rate_hz": rate, "preview_peaks": stats}
+             "internal_rate_hz": rate, "preview": stats}
     eq_cause = cause if params else "none"
     truth["equivalent"] = {"sensor": site.location or draft.channels[1][0],
                            **draws.equivalents(site.phi_sensor, site.phi_effect, site.omega, site.zeta, eq_cause,

@@ -1,13 +1,16 @@
 """Cases for a live regime monitor: the base-excited two-beam rig with stoppers on both beams, driven
 through segments in which neither beam, only beam 1, only beam 2, or both beams hit their stoppers.
 
-The programme is built segment by segment, each simulated from the state the previous one left: for
-each segment's intended regime a list of candidate drives is tried (from the linear receptances of the
-stopper points: a level below the gaps for "none", a frequency and level where one beam's linear
-response exceeds its gap and the other's does not, or, where the beams are too alike for that, a level
-just below the gaps above the resonance with an unmeasured kick on one beam that puts it on the
-hitting branch of the hardening stopper), and the first whose simulation shows the intended regime in
-the second half of the segment is kept (else the best one; the truth tells what happened).
+The programme is built segment by segment, each simulated from the state the previous one left, as an
+experimenter would tune it. For each segment's intended regime, starting plans come from the linear
+receptances of the stopper points (a level below the gaps for "none"; a level above both gaps at the
+frequency where the smaller margin is largest for "both"; for one beam alone, the frequencies where its
+linear response over its gap most exceeds the other's, or, where the beams are too alike for that, a
+level just below the gaps above the resonance with an unmeasured kick on that beam onto the hitting
+branch of the hardening stopper). Each plan's amplitude is then bisected between a level found too low
+and one found too high until the segment's second half shows the intended regime. Where no plan works
+(near-identical beams, strong coupling and soft stoppers may have no state with one beam hitting alone)
+the rig is changed and the programme restarts (regime_case).
 
 Per output sample the truth holds, per beam: `contact` (the stopper force was nonzero at some internal
 step within the sample's interval (t - 1/fs, t]) and `hitting` (HITTING_DEFINITION); and the achieved
@@ -67,8 +70,7 @@ class RegimeRig:
         drives = [Drive("base", -rig.structure.mass @ rig.structure.base_influence, programme)]
         drives += [Drive(f"kick{i + 1}", rig.tip(k["beam"] - 1),
                          Hammer([Hit(k["time_s"], k["peak_force_n"], k["width_s"])])) for i, k in enumerate(kicks)]
-        return Setup(self.model, drives, {"base": Output([], [(0, 1.0)]), **tips}, elements=list(self.stoppers),
-                     base_drive="base")
+        return Setup(self.model, drives, {"base": Output([], [(0, 1.0)]), **tips}, elements=list(self.stoppers))
 
 
 def draw_regime_rig(rng: np.random.Generator, fs_hz: int | None = None) -> RegimeRig:
