@@ -89,9 +89,6 @@ class Programme(Signal):
         """The phase at the last of n samples, to start the next programme from."""
         return float(self._phase_amplitude(rate_hz, n)[0][-1] % (2 * np.pi))
 
-    def boundaries_s(self) -> list[float]:
-        return list(np.cumsum([0.0] + [s.duration_s for s in self.segments]))
-
     def describe(self) -> dict:
         return {"type": "programme", "transition_s": self.transition_s,
                 "initial_frequency_hz": self.initial_frequency_hz,

@@ -37,9 +37,6 @@ class Setup:
     coil: Coil | None = None
     base_drive: str | None = None  # name of the drive that is the base acceleration
 
-    def drive_index(self, name: str) -> int:
-        return [d.name for d in self.drives].index(name)
-
     def rate_hz(self, fs_hz: int, min_rate_hz: float = 20e3) -> int:
         rate = internal_rate(fs_hz, self.model, self.elements, min_rate_hz)
         if self.coil is not None:  # the coil's real pole -R/L: |lambda dt| <= 1 (RK4 is stable to 2.78)
@@ -60,10 +57,6 @@ class Run:
     @property
     def decimation(self) -> int:
         return self.rate_hz // self.fs_hz
-
-    def at_output_rate(self, x: np.ndarray) -> np.ndarray:
-        """Samples of an internal-rate array at the output instants (no filtering)."""
-        return x[:: self.decimation][: self.n_out]
 
 
 def base_velocity(acceleration: np.ndarray, grid_rate_hz: float) -> np.ndarray:

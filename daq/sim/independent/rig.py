@@ -91,22 +91,11 @@ class Rig:
         b[-1] = 1.0
         return b
 
-    def stinger_force(self) -> list[tuple[np.ndarray, int]]:
-        """Output terms of the force the stinger applies to the beam (what a force cell there reads)."""
-        st = self.spec.stinger
-        rel = self.armature() - self.point(st.beam, st.x_m)
-        return [(st.shaker.stinger_n_per_m * rel, 0), (st.shaker.stinger_n_s_per_m * rel, 1)]
-
     def first_mode(self, beam: int) -> tuple[float, float, np.ndarray]:
         """(omega rad/s, damping ratio, mass-normalised shape embedded in the rig's DOFs) of one beam alone."""
         omega, phi = normal_modes(self.beam_mass[beam], self.beam_stiffness[beam])
         zeta = float(phi[:, 0] @ self.beam_damping[beam] @ phi[:, 0] / (2 * omega[0]))
         return float(omega[0]), zeta, self._embed(beam, phi[:, 0])
-
-    def static_compliance(self, beam: int, b: np.ndarray) -> float:
-        """Static compliance of a coordinate of one beam alone (m/N)."""
-        s = slice(self.offsets[beam], self.offsets[beam] + self.beams[beam].n_dof)
-        return float(b[s] @ np.linalg.solve(self.beam_stiffness[beam], b[s]))
 
 
 def build_rig(spec: RigSpec) -> Rig:
