@@ -167,7 +167,8 @@ def _rig_draft(rng: np.random.Generator, family: str, cause: str) -> Draft:
         if st.shaker is not None:
             structure["shaker"] = vars(st.shaker)
     d = Draft(family=family, fs_hz=fs, duration_s=duration, setup=setup, scaled=[drives[0].name],
-              target_m=rng.uniform(1.5e-3, 5e-3), site=site,
+              target_m=rng.uniform(*((0.7e-3, 2.5e-3) if signal_kind in ("random", "multisine") else (1.5e-3, 5e-3))),
+              site=site,
               channels=[(list(outputs)[0], excitation.split(":")[1]), ("tip1", "acceleration"),
                         ("tip2", "acceleration")],
               excitation=excitation, structure=structure, signal_kind=signal_kind, joint=joint,

@@ -53,7 +53,7 @@ def tune(make, target_hz: float, low: float, high: float) -> BeamSpec:
 
 
 def draw_cantilevers(rng: np.random.Generator, joint_beam: int | None = None,
-                     mistuning_max: float = 0.15) -> tuple[tuple[BeamSpec, BeamSpec], dict]:
+                     mistuning: tuple[float, float] = (0.0, 0.15)) -> tuple[tuple[BeamSpec, BeamSpec], dict]:
     """Two aluminium strips with tip masses, beam 1 at 8-15 Hz, beam 2 mistuned by 0-15 % (length or mass)."""
     thickness = float(rng.choice([1.5e-3, 1.5e-3, 2.0e-3]))
     common = dict(width_m=0.02, thickness_m=thickness, youngs_pa=rng.uniform(68e9, 71e9),
@@ -70,7 +70,7 @@ def draw_cantilevers(rng: np.random.Generator, joint_beam: int | None = None,
 
     f1 = rng.uniform(8, 15)
     b1 = tune(lambda length: make(0, length, tip_mass), f1, 0.08, 0.6)
-    mistuning = rng.uniform(0, mistuning_max) * rng.choice([-1, 1])
+    mistuning = rng.uniform(*mistuning) * rng.choice([-1, 1])
     via = str(rng.choice(["length", "tip_mass"]))
     f2 = f1 * (1 + mistuning)
     if via == "length":
@@ -87,7 +87,7 @@ def draw_zetas(rng: np.random.Generator, n: int, low: float = 0.005, high: float
 
 
 def draw_rig(rng: np.random.Generator, beams: tuple[BeamSpec, BeamSpec], drive: str, drive_beam: int = 0,
-             hammer: bool = False) -> RigSpec:
+             hammer: bool = False, coupling: tuple[float, float] = (0.01, 0.10)) -> RigSpec:
     """Damping, coupling (1-10 % of beam 1's first-mode stiffness at the coupling point) and the drive."""
     zetas = tuple(draw_zetas(rng, 2 * b.n_elements) for b in beams)
     frac = rng.uniform(0.4, 0.8)
@@ -96,7 +96,7 @@ def draw_rig(rng: np.random.Generator, beams: tuple[BeamSpec, BeamSpec], drive: 
     p = bm.point(frac * beams[0].length_m)
     k_mode = omega[0] ** 2 / (p @ phi[:, 0]) ** 2
     m_mode = 1 / (p @ phi[:, 0]) ** 2
-    k_c = rng.uniform(0.01, 0.10) * k_mode
+    k_c = rng.uniform(*coupling) * k_mode
     c_c = rng.uniform(0.0, 0.02) * 2 * math.sqrt(k_c * m_mode)
     stinger = None
     if drive == "force":
@@ -107,7 +107,7 @@ def draw_rig(rng: np.random.Generator, beams: tuple[BeamSpec, BeamSpec], drive: 
                             suspension_n_s_per_m=rng.uniform(0.5, 2.0), stinger_n_per_m=log_uniform(rng, 5e4, 5e5),
                             stinger_n_s_per_m=rng.uniform(1.0, 5.0), inductance_h=rng.uniform(2e-4, 1e-3),
                             resistance_ohm=rng.uniform(2.0, 5.0), force_factor_n_per_a=rng.uniform(1.0, 3.0))
-        stinger = StingerSpec(beam=drive_beam, x_m=rng.uniform(0.1, 0.3) * beams[drive_beam].length_m,
+        stinger = StingerSpec(beam=drive_beam, x_m=rng.uniform(0.15, 0.35) * beams[drive_beam].length_m,
                               cell_mass_kg=rng.uniform(1e-3, 5e-3), shaker=shaker)
     return RigSpec(beams=beams, zetas=zetas, coupling_x_m=(frac * beams[0].length_m, frac * beams[1].length_m),
                    coupling_n_per_m=k_c, coupling_n_s_per_m=c_c, stinger=stinger)
@@ -135,7 +135,7 @@ def draw_tonal_signal(rng: np.random.Generator, kind: str, modes_hz: list[float]
     """A unit-scale signal of the given kind around the structure's lowest modes."""
     f_lo, f_hi = min(modes_hz), max(modes_hz)
     top = 0.4 * fs_hz
-    band_hi = min(top, rng.uniform(5, 20) * f_hi)
+    band_hi = min(top, rng.uniform(3, 10) * f_hi)
     if kind == "stepped_sine":
         n = int(rng.integers(4, 9))
         dur = (duration_s - 1.0) / n

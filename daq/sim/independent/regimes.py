@@ -7,10 +7,12 @@ receptances of the stopper points (a level below the gaps for "none"; a level ab
 frequency where the smaller margin is largest for "both"; for one beam alone, the frequencies where its
 linear response over its gap most exceeds the other's, or, where the beams are too alike for that, a
 level just below the gaps above the resonance with an unmeasured kick on that beam onto the hitting
-branch of the hardening stopper). Each plan's amplitude is then bisected between a level found too low
-and one found too high until the segment's second half shows the intended regime. Where no plan works
-(near-identical beams, strong coupling and soft stoppers may have no state with one beam hitting alone)
-the rig is changed and the programme restarts (regime_case).
+branch of the hardening stopper; both start with a few quiet seconds, so that a beam hitting in the
+previous segment falls off its hitting branch, which a hardening stopper extends above the
+resonance). Each plan's amplitude is then bisected between a level found too low and one found too
+high until the segment's second half shows the intended regime. Where no plan works (near-identical
+beams, strong coupling and soft stoppers may have no state with one beam hitting alone) the rig is
+changed and the programme restarts (regime_case).
 
 Per output sample the truth holds, per beam: `contact` (the stopper force was nonzero at some internal
 step within the sample's interval (t - 1/fs, t]) and `hitting` (HITTING_DEFINITION); and the achieved
@@ -73,10 +75,11 @@ class RegimeRig:
         return Setup(self.model, drives, {"base": Output([], [(0, 1.0)]), **tips}, elements=list(self.stoppers))
 
 
-def draw_regime_rig(rng: np.random.Generator, fs_hz: int | None = None) -> RegimeRig:
-    """Two cantilevers (beam 2 mistuned 0-15 %), coupled 1-10 %, on a shaking frame, with stoppers."""
-    beams, info = draws.draw_cantilevers(rng)
-    rig = build_rig(draws.draw_rig(rng, beams, "base"))
+def draw_regime_rig(rng: np.random.Generator, fs_hz: int | None = None, redraw: bool = False) -> RegimeRig:
+    """Two cantilevers (beam 2 mistuned 0-15 %), coupled 1-10 %, on a shaking frame, with stoppers; a rig
+    drawn again because the first could not show every regime is mistuned 5-15 % and coupled 1-5 %."""
+    beams, info = draws.draw_cantilevers(rng, mistuning=(0.05, 0.15) if redraw else (0.0, 0.15))
+    rig = build_rig(draws.draw_rig(rng, beams, "base", coupling=(0.01, 0.05) if redraw else (0.01, 0.10)))
     drawn_fs = int(rng.choice([500, 1000, 1000, 2000, 2500, 5000]))
     fs = fs_hz or drawn_fs
     model = reduce(rig.structure, 0.6 * fs, 8)
@@ -157,7 +160,7 @@ def strategies(rr: RegimeRig, regime: str, rng: np.random.Generator) -> list[Pla
         if ratio[i] < 1.3 or len(plans) == 3:
             break
         if all(abs(freqs[i] / p.frequency_hz - 1) > 0.02 for p in plans):
-            plans.append(Plan(freqs[i], 1.3 / r[i, b], f"only beam {b + 1} above its gap"))
+            plans.append(Plan(freqs[i], 1.3 / r[i, b], f"only beam {b + 1} above its gap", quiet_first=True))
     f_res = freqs[np.argmax(r[:, b])]
     for factor in (1.04, 1.08, 1.12):
         j = int(np.argmin(np.abs(freqs - f_res * factor)))
@@ -278,24 +281,29 @@ def design_segment(rr: RegimeRig, regime: str, duration_s: float, state: State |
     return best
 
 
-def _record(rr: RegimeRig, runs: list[Run], rng: np.random.Generator, snr_db: tuple[float, float]) -> tuple:
+def _record(rr: RegimeRig, runs: list[Run], rng: np.random.Generator, snr_db: tuple[float, float],
+            n_skip: int) -> tuple:
+    """The three channels over the runs, less the first n_skip output samples (the instruments run on
+    through a settling segment that is not recorded, so their filters are in steady state)."""
     card = draws.draw_card(rng, rr.fs_hz, bits=(16, 16, 18, 24))
     channels = {"base": "base_acceleration", "tip1": "acceleration", "tip2": "acceleration"}
     columns, kinds, units, info = {}, {}, {}, {}
-    n_out = sum(r.n_out for r in runs) + 1
+    n_total = sum(r.n_out for r in runs) + 1
     for name, kind in channels.items():
         sampler = Sampler(card, rr.rate_hz, rng)
         for r in runs:
             sampler.push(r.outputs[name])
         ch = draws.draw_channel(rng, kind, snr_db=snr_db, clip_probability=0.0)
-        acq = digitise(*sampler.sampled(n_out), card, ch)
+        y, w = sampler.sampled(n_total)
+        acq = digitise(y[n_skip:], w[n_skip:], card, ch)
         columns[name], kinds[name], units[name], info[name] = acq.values, kind, UNITS[kind], acq.info
-    return columns, kinds, units, info, card, n_out
+    return columns, kinds, units, info, card, n_total - n_skip
 
 
 def _case(rr: RegimeRig, pieces: list[Piece], intended: list[str], seed: int, rng: np.random.Generator,
-          kind: str) -> Case:
-    columns, kinds, units, info, card, n_out = _record(rr, [p.run for p in pieces], rng, (25, 40))
+          kind: str, settle: Piece | None = None) -> Case:
+    runs = ([settle.run] if settle else []) + [p.run for p in pieces]
+    columns, kinds, units, info, card, n_out = _record(rr, runs, rng, (25, 40), settle.run.n_out if settle else 0)
     t = np.arange(n_out) / rr.fs_hz
     skip = [0] + [1] * (len(pieces) - 1)  # later pieces start with the previous one's last sample
     contact = np.vstack([_run_contact(p.run)[s:] for p, s in zip(pieces, skip)])
@@ -349,9 +357,10 @@ def regime_case(seed: int, fs_hz: int | None = None, segment_s: tuple[float, flo
 
     When a regime cannot be reached (its best drive holds it for less than half of its segment's second
     half), the programme starts again on a changed rig: alternately with the stoppers set anew
-    (set_stoppers, favouring the beam that could not hit alone) and with a newly drawn rig, at most
-    max_settings times in all. Near-identical beams with a strong coupling and soft stoppers may have no
-    state in which one beam hits alone. The truth records the settings tried and what was achieved.
+    (set_stoppers, favouring the beam that could not hit alone) and with a newly drawn rig (mistuned
+    5-15 %, coupled 1-5 %), at most max_settings times in all. Near-identical beams with a strong
+    coupling and soft stoppers may have no state in which one beam hits alone. The truth records the
+    settings tried and what was achieved.
     """
     rng = np.random.default_rng(seed)
     rr = draw_regime_rig(rng, fs_hz)
@@ -372,7 +381,7 @@ def regime_case(seed: int, fs_hz: int | None = None, segment_s: tuple[float, flo
         if setting % 2 == 0:
             rr = set_stoppers(rr, rng, favour={"beam1": 0, "beam2": 1}.get(regime))
         else:
-            rr = draw_regime_rig(rng, fs_hz)
+            rr = draw_regime_rig(rng, rr.fs_hz, redraw=True)
     case = _case(rr, pieces, order, seed, rng, "regimes")
     case.truth["settings_tried"] = setting + 1
     return case
@@ -382,25 +391,26 @@ def steady_case(seed: int, regime: str, minutes: float = 10.0, fs_hz: int = 1000
                 max_settings: int = 5) -> Case:
     """minutes of one steady regime (for false-alarm tests).
 
-    A 30 s segment finds a drive that holds the regime in 99 % of its second half; the drive is then held,
-    simulated in chunks, each of which must hold the regime in 99 % of its samples. Where either fails,
-    the rig is changed as in regime_case and the search starts again (at most max_settings times; the last
-    attempt is kept whatever it achieved, and the truth tells).
+    A 30 s settling segment (not recorded; the instruments run through it) finds a drive that holds the
+    regime in 99 % of its second half; the record then holds that drive, simulated in chunks, each of
+    which must hold the regime in 99 % of its samples. Where either fails, the rig is changed as in
+    regime_case and the search starts again (at most max_settings times; the last attempt is kept
+    whatever it achieved, and the truth tells).
     """
     if regime not in REGIMES:
         raise ValueError(f"regime must be one of {tuple(REGIMES)}")
     rng = np.random.default_rng(seed)
     rr = draw_regime_rig(rng, fs_hz)
-    design_s = 30.0
+    settle_s = 30.0
     for setting in range(max_settings):
         last = setting == max_settings - 1
-        first = design_segment(rr, regime, design_s, None, (strategies(rr, regime, rng)[0].frequency_hz, 0.0, 0.0),
-                               rng, None, accept=0.99)
-        pieces = [first]
-        state, prev, history = _advance(first)
-        steady = replace(first.plan, quiet_first=False, kicks=())
-        done, total = design_s, minutes * 60.0
-        held = first.share >= 0.99
+        settle = design_segment(rr, regime, settle_s, None, (strategies(rr, regime, rng)[0].frequency_hz, 0.0, 0.0),
+                                rng, None, accept=0.99)
+        state, prev, history = _advance(settle)
+        steady = replace(settle.plan, quiet_first=False, kicks=())
+        pieces: list[Piece] = []
+        done, total = 0.0, minutes * 60.0
+        held = settle.share >= 0.99
         while (held or last) and done < total - 1e-9:
             d = min(chunk_s, total - done)
             piece = simulate_piece(rr, steady, d, state, prev, regime, 1.0, history)
@@ -413,7 +423,9 @@ def steady_case(seed: int, regime: str, minutes: float = 10.0, fs_hz: int = 1000
         if setting % 2 == 0:
             rr = set_stoppers(rr, rng, favour={"beam1": 0, "beam2": 1}.get(regime))
         else:
-            rr = draw_regime_rig(rng, fs_hz)
-    case = _case(rr, pieces, [regime] * len(pieces), seed, rng, "steady")
+            rr = draw_regime_rig(rng, rr.fs_hz, redraw=True)
+    case = _case(rr, pieces, [regime] * len(pieces), seed, rng, "steady", settle=settle)
     case.truth["settings_tried"] = setting + 1
+    case.truth["settling"] = {"duration_s": settle_s, "strategy": settle.plan.strategy,
+                              "drive": settle.programme.describe(), "kicks_before_the_record": list(settle.kicks)}
     return case
