@@ -4,9 +4,12 @@ its instruments, with the truth the science is judged against.
 `discovery_case(seed, family=None, cause=None)` draws (numpy Generator seeded with `seed`): the family,
 the cause (among those the family makes sensible), the structure, the excitation and record, then runs
 a linear preview of the record to set the excitation level (the response at the sensor reaches a drawn
-target) and the effect's parameters relative to the response at the effect's coordinate (a gap below the
-peak, a cubic term worth 10-50 % of the local static stiffness at the peak, friction and drag worth 0.5-2
-times the linear modal damping near the peak, ...), then runs the record with the effect and measures it.
+target) and the effect's parameters relative to the response at the effect's coordinate (a gap at 45-85 %
+of the smaller of the peak and 2.5 RMS, a stopper 2-1000 times the local static stiffness, a cubic term
+worth 10-50 % of the local static stiffness at the peak (3-12 % when softening), friction and drag whose
+equivalent viscous damping at the RMS amplitude is 0.5-2 times c_ref below, a joint whose 12-20 Jenkins
+elements hold 40-80 % of its stiffness and start slipping at 5-30 % to 80-200 % of the peak rotation),
+then runs the record with the effect and measures it.
 
 The truth's `effect_strength` is RMS(f_nl) / RMS(k_static u) over the record, f_nl the element's force
 (for a joint: its departure from the stuck joint; for membrane stretching: its generalised force on mode
