@@ -43,9 +43,10 @@ class Faults:
 
     corrupt_byte_rate: float = field(default=0.0, metadata={"min": 0.0, "max": 1.0})
     drop_byte_rate: float = field(default=0.0, metadata={"min": 0.0, "max": 1.0})
-    garbage_bursts_per_s: float = field(default=0.0, metadata={"min": 0.0, "max": 1000.0})
-    garbage_burst_bytes: int = field(default=64, metadata={"min": 1, "max": 1 << 20})
+    garbage_bursts_per_s: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
+    garbage_burst_bytes: int = field(default=64, metadata={"min": 1, "max": 4096})
     drop_frame_rate: float = field(default=0.0, metadata={"min": 0.0, "max": 1.0})
+    duplicate_frame_rate: float = field(default=0.0, metadata={"min": 0.0, "max": 1.0})  # a frame sent twice
     clock_drift_ppm: float = field(default=0.0, metadata={"min": -10000.0, "max": 10000.0})
     disconnect_at_s: tuple[float, ...] = field(default=(), metadata={"min": 0.0, "max": 1e7, "max_len": 1000})
     disconnect_for_s: float = field(default=1.0, metadata={"min": 0.0, "max": 3600.0})

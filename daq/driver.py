@@ -111,8 +111,9 @@ class ClockEstimator:
         return offset, (slope - 1.0) * 1e6
 
 
-def stable_port(port: str, by_id: Path = BY_ID) -> str:
+def stable_port(port: str, by_id: Path | None = None) -> str:
     """The ``/dev/serial/by-id/`` link of a USB serial device path, if one points at it; else ``port``."""
+    by_id = BY_ID if by_id is None else by_id
     if "://" in port or not port.startswith("/dev/") or str(Path(port).parent) == str(by_id):
         return port
     try:

@@ -85,9 +85,14 @@ class PtyServer:
             os.replace(tmp, self.link)  # atomic: a reader never sees a half-made link
 
     def _unlink(self) -> None:
-        """Remove the link if it is still ours (pointing at our pty)."""
-        if self.link is not None and self.link.is_symlink() and os.readlink(self.link) == self.path:
-            self.link.unlink()
+        """Remove the link if it is still ours (pointing at the pty we hold open)."""
+        if self.link is None or self.path is None or self._master is None:
+            return
+        try:
+            if os.readlink(self.link) == self.path:
+                self.link.unlink()
+        except (FileNotFoundError, OSError):
+            pass
 
     def _close_pty(self) -> None:
         for fd in (self._master, self._slave):

@@ -50,7 +50,8 @@ def parse_yaml(text: str, source: str) -> Any:
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark else ""
-        raise ValueError(f"{source}: not valid YAML{where}: {getattr(exc, 'problem', None) or exc}") from None
+        what = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        raise ValueError(f"{source}: not valid YAML{where}: {what}") from None
     except RecursionError:
         raise ValueError(f"{source}: nested too deeply (at most {MAX_DEPTH} levels)") from None
 

@@ -101,14 +101,18 @@ class SimulatedDevice:
             keep = self.rng.random(n) >= f.drop_frame_rate
         self.sent_frames += int(keep.sum())
         data = encode(seq[keep], t_us[keep], counts[keep], np.where(clipped[keep], FLAG_CLIPPED, 0))
+        copies = keep.astype(np.int64)
+        if f.duplicate_frame_rate > 0:  # a frame sent twice in a row (a firmware retry)
+            copies[keep] += self.rng.random(int(keep.sum())) < f.duplicate_frame_rate
+            data = np.repeat(np.frombuffer(data, np.uint8).reshape(-1, 24), copies[keep], axis=0).tobytes()
         # a status frame before the data frame of every whole second of device time (and at boot)
         per = max(1, int(round(self.rate_hz)))
         marks = np.flatnonzero(seq % per == 0)
         if marks.size:
             pieces, pos = [], 0
-            kept_before = np.concatenate([[0], np.cumsum(keep)])
+            sent_before = np.concatenate([[0], np.cumsum(copies)])
             for m in marks.tolist():
-                cut = int(kept_before[m]) * 24
+                cut = int(sent_before[m]) * 24
                 pieces.append(data[pos:cut])
                 self.seq = int(seq[m])
                 pieces.append(self.status_frame())
