@@ -16,7 +16,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Message

@@ -433,7 +433,6 @@ class _Walker:
             nxt = self.resync(0)
             s.damage.append(Damage(0, nxt, "bytes", "no MCAP magic at the start"))
             pos = nxt
-        summary_start = None
         while pos < n:
             if pos + 8 == n and bytes(b[pos:n]) == MAGIC:
                 break
@@ -441,7 +440,7 @@ class _Walker:
                 op, end, parsed = self.check(pos)
             except Bad as exc:
                 h = self.header(pos)
-                if h is None and pos + 9 <= n and 1 <= b[pos] <= 15:
+                if h is None and pos + 9 <= n and 1 <= b[pos] <= 15 and bytes(b[n - 8:n]) != MAGIC:
                     (length,) = struct.unpack_from("<Q", b, pos + 1)
                     if pos + 9 + length > n and length < (1 << 40):  # a record the end of the file cut
                         nxt = self.resync(pos + 1)
@@ -452,7 +451,7 @@ class _Walker:
                             continue
                 what = NAMES.get(h[0], "bytes") if h else "bytes"
                 if h and h[0] == CHUNK:
-                    # the chunk's fields add up (else check() would have said so first): skip it whole
+                    # if the chunk's fields add up, only its content is bad: skip it whole
                     try:
                         _body(CHUNK, b, pos + 9, h[1])
                         s.damage.append(Damage(pos, h[1], "chunk", str(exc)))
@@ -467,7 +466,6 @@ class _Walker:
             self.take(op, pos, end, parsed)
             if op == DATA_END:
                 s.data_end = True
-                summary_start = end
             if op == FOOTER:
                 s.footer = True
                 s_start, _, crc = parsed
@@ -476,8 +474,6 @@ class _Walker:
                     got = zlib.crc32(bytes(b[pos:pos + 9 + 16]), got)
                     if got != crc:
                         s.damage.append(Damage(s_start, pos, "summary", "summary CRC mismatch"))
-                elif summary_start is None and s_start:
-                    pass
             pos = end
 
     def take(self, op: int, pos: int, end: int, parsed) -> None:
