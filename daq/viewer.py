@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -276,6 +277,18 @@ class RerunViewer:
         self.rec.set_time("time", duration=float(self._rel_t[-1]))
         self.rec.log("phase/tip1", self.rr.LineStrips3D([pts]))
 
+    def _stop_server(self, sig: int = signal.SIGTERM) -> None:
+        """End the web server: its whole process group (the ``rerun`` script runs the viewer binary as a child)."""
+        proc, self._proc = self._proc, None
+        try:
+            os.killpg(proc.pid, sig)
+            proc.wait(timeout=5)
+        except ProcessLookupError:
+            return
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=5)
+
     def abort(self) -> None:
         """Stop the servers and remove an unfinished .rrd (the command failed before it started)."""
         if self.rec is not None:
@@ -284,8 +297,7 @@ class RerunViewer:
             self._rrd.abort()
             self._rrd = None
         if self._proc is not None and self.mode == "web":
-            self._proc.kill()
-            self._proc = None
+            self._stop_server(signal.SIGKILL)
 
     def close(self) -> None:
         if self.rec is not None:
@@ -296,9 +308,4 @@ class RerunViewer:
                 self._rrd.commit()
                 self._rrd = None
         if self._proc is not None and self.mode == "web":  # the web server lives as long as the command
-            self._proc.terminate()
-            try:
-                self._proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                self._proc.kill()
-            self._proc = None
+            self._stop_server()

@@ -85,3 +85,6 @@ def test_web_viewer_and_data_server_listen_on_localhost_only():
         out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
     assert "played 6.00 s" in out
+    for port in (web, grpc):  # the servers end with the command: nothing keeps listening
+        with pytest.raises(OSError):
+            socket.create_connection(("127.0.0.1", port), timeout=2).close()
