@@ -7,7 +7,7 @@ which holds on a noisy machine where absolute times do not.
 
 from __future__ import annotations
 
-import os
+import re
 import resource
 import subprocess
 import sys
@@ -15,13 +15,23 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
+from ident.cli import number
+from replay.formats.mcap import read_recording
+
+from .config import load_config
+from .protocol import Decoder
+from .sim.device import SimulatedDevice
+
 LINE_BAUD = 921_600
 LINE_BYTES_PER_S = LINE_BAUD / 10  # 8N1: 10 bits per byte
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("bench", help="benchmarks: decoder throughput, bytes per sample, CPU share")
-    p.add_argument("--seconds", type=float, default=10.0, help="length of the recording runs (default 10)")
+    p.add_argument("--seconds", type=number(0.0, 3600.0, gt=True, unit="s"), default=10.0,
+                   help="length of the recording runs (default 10)")
     p.add_argument("--live", action="store_true",
                    help="also the live pipeline: replay --max speed, latency, CPU share of identification")
     p.set_defaults(func=run)
@@ -39,12 +49,6 @@ def _timed(cmd: list[str]) -> tuple[float, float]:
 
 
 def run(args) -> int:
-    import numpy as np
-
-    from .config import load_config
-    from .sim.device import SimulatedDevice
-    from .protocol import Decoder
-
     data = SimulatedDevice(load_config(None)).frames(400_000)  # 9.6 MB, 200 s of the rig
     best = 0.0
     for _ in range(3):
@@ -66,8 +70,6 @@ def run(args) -> int:
         c_sim, w_sim = _timed(py + ["sim", "--duration", str(args.seconds)])
         c_rec, w_rec = _timed(py + ["record", "--sim", "--quiet", "--duration", str(args.seconds), "-o", str(out)])
         size = out.stat().st_size
-        from replay.reader import read_recording
-
         n = len(read_recording(out, raw=False).seq)
     share_sim = (c_sim - c_start) / (w_sim - w_start)
     share_rec = (c_rec - c_start) / (w_rec - w_start)
@@ -84,10 +86,6 @@ def run(args) -> int:
 
 def _live(args, py, c_start, w_start) -> None:
     """Live pipeline: replay --max with and without identification; latency and CPU of daq record."""
-    import re
-
-    import numpy as np
-
     with tempfile.TemporaryDirectory() as tmp:
         cfg = Path(tmp) / "kick.yaml"
         cfg.write_text("excitation:\n  ramp_s: 1.0\n  kicks:\n    - {t_s: 20.0447, beam: 1, velocity_m_per_s: 0.3}\n")

@@ -1,8 +1,14 @@
-"""``daq``: record the rig (or its simulation) to MCAP; serve the simulated rig on a pty."""
+"""``daq``: record the rig (or its simulation) to MCAP; serve the simulated rig on a pty.
+
+Order of every writing command (README "What is safe"): check the arguments, read the config, check
+every output against the inputs and each other (daq.safeio), open the port; only then create the
+files, as ``NAME.part`` renamed to ``NAME`` when the recording ends.
+"""
 
 from __future__ import annotations
 
 import argparse
+import queue
 import signal
 import sys
 import tempfile
@@ -10,9 +16,20 @@ import threading
 import time
 from pathlib import Path
 
-from ident.cli import OneLineParser, run_guarded
+import numpy as np
 
+from ident.cli import DURATION, SEED, WINDOW, OneLineParser, number, run_guarded
+from ident.live.pipeline import Pipeline, PipelineConfig, rolling_config
+
+from . import bench
 from .config import load_config
+from .driver import Acquisition, Event
+from .eventlog import JsonlEvents
+from .recorder import McapRecorder
+from .safeio import Output, check_outputs, part_path
+from .sim.device import DEFAULT_DEVICE_ID
+from .transport import PtyServer, check_link
+from .viewer import DEFAULT_BIND, RerunViewer, resolve_mode
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -20,22 +37,28 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     r = sub.add_parser("record", help="record the rig (default: the simulated rig) to an MCAP file")
     src = r.add_mutually_exclusive_group()
-    src.add_argument("--port", help="serial device path or pyserial URL (rig://, loop://, ...)")
+    src.add_argument("--port", help="serial device path (a /dev/serial/by-id/ path is best) or pyserial URL "
+                                    "(rig://, loop://, ...)")
     src.add_argument("--sim", action="store_true", help="record the simulated rig over a pty (the default)")
     r.add_argument("--config", type=Path, help="rig and daq config (YAML); defaults if omitted")
-    r.add_argument("-o", "--output", type=Path, help="MCAP file to write (default rig-YYYYmmdd-HHMMSS.mcap)")
-    r.add_argument("--duration", type=float, help="stop after this many seconds of samples")
+    r.add_argument("-o", "--output", type=Path, help="MCAP file to write (default rig-YYYYmmdd-HHMMSS.mcap); "
+                                                     "written as NAME.part until the recording ends")
+    r.add_argument("--duration", type=DURATION, help="stop after this many seconds of samples")
     r.add_argument("--quiet", action="store_true", help="no live status line")
+    r.add_argument("--force", action="store_true", help="replace existing output files")
     add_live_options(r, "the recording")
     r.set_defaults(func=record)
     s = sub.add_parser("sim", help="serve the simulated rig on a pty and print its path")
     s.add_argument("--config", type=Path, help="rig and daq config (YAML)")
-    s.add_argument("--link", type=Path, help="also make this symlink point at the pty (kept across reconnects)")
-    s.add_argument("--duration", type=float, help="stop after this many seconds")
-    s.add_argument("--seed", type=int, help="noise seed (default from the config)")
+    s.add_argument("--link", type=Path, help="also make this symlink point at the pty (removed while the simulated "
+                                             "cable is pulled, like /dev/serial/by-id)")
+    s.add_argument("--duration", type=DURATION, help="stop after this many seconds")
+    s.add_argument("--seed", type=SEED, help="noise seed (default from the config)")
+    s.add_argument("--device-id", type=number(0, 2**32 - 1, integer=True), default=DEFAULT_DEVICE_ID,
+                   help=f"the unit's id in its status frames (default {DEFAULT_DEVICE_ID:#x})")
+    s.add_argument("--force", action="store_true", help="replace a --link symlink that points at something "
+                                                        "other than a pty (the link, never a file)")
     s.set_defaults(func=sim)
-    from . import bench
-
     bench.add_parser(sub)
     return p
 
@@ -45,23 +68,26 @@ def add_live_options(p, beside: str) -> None:
     p.add_argument("--viewer", choices=("auto", "spawn", "web", "save", "none"), default="auto",
                    help=f"rerun viewer: spawn, web, save (an .rrd next to {beside}), none; auto (default): "
                         "spawn or web in an interactive terminal, none otherwise")
+    p.add_argument("--bind", default=DEFAULT_BIND,
+                   help=f"address the viewer's servers listen on (default {DEFAULT_BIND}: this machine only; "
+                        "0.0.0.0 opens the live data to the network without authentication)")
     p.add_argument("--events", type=Path, help="write events as JSON lines here")
     p.add_argument("--no-identify", action="store_true", help="no rolling SINDy (filters and regimes only)")
-    p.add_argument("--window", type=float, default=4.0, help="rolling SINDy window [s] (default 4)")
-    p.add_argument("--hop", type=float, default=1.0, help="rolling SINDy hop [s] (default 1)")
+    p.add_argument("--window", type=WINDOW, default=4.0, help="rolling SINDy window [s] (default 4)")
+    p.add_argument("--hop", type=WINDOW, default=1.0, help="rolling SINDy hop [s] (default 1)")
 
 
-def _check_duration(d: float | None) -> None:
-    if d is not None and not (d > 0):
-        raise ValueError(f"--duration must be a positive number of seconds, got {d}")
+def check_live(args) -> None:
+    if args.hop > args.window:
+        raise ValueError(f"--hop {args.hop:g} s is longer than --window {args.window:g} s")
 
 
 def sim(args) -> int:
-    from .transport import PtyServer
-
-    _check_duration(args.duration)
     cfg = load_config(args.config)
-    server = PtyServer(cfg, args.link, args.seed)
+    if args.link is not None:
+        check_outputs([Output("--link", args.link)], [args.config], force=True)  # a folder or the config itself
+        check_link(args.link, args.force)
+    server = PtyServer(cfg, args.link, args.seed, args.device_id, force_link=args.force)
     print(f"simulated rig on {server.path}" + (f" (link {args.link})" if args.link else ""), flush=True)
     _on_signals(server.stop)
     server.serve(args.duration)
@@ -75,16 +101,22 @@ def _on_signals(stop) -> None:
         signal.signal(sig, handler)
 
 
-def record(args) -> int:
-    from .driver import Acquisition
-    from .recorder import McapRecorder
-    from .transport import PtyServer
+def _port_input(port: str | None) -> Path | None:
+    """A port that names a file is also an input: no output may be it."""
+    return Path(port) if port and "://" not in port else None
 
-    _check_duration(args.duration)
+
+def record(args) -> int:
+    check_live(args)
     cfg = load_config(args.config)
     out = args.output or Path(time.strftime("rig-%Y%m%d-%H%M%S.mcap"))
-    if out.exists() and out.is_dir():
-        raise ValueError(f"-o {out} is a folder; give a file name ending in .mcap")
+    mode = "none" if args.no_identify else resolve_mode(args.viewer)
+    rrd = out.with_suffix(".rrd") if mode == "save" else None
+    inputs = [args.config, _port_input(args.port)]
+    outputs = [Output("-o", out), Output("-o", part_path(out), replaceable=False), Output("--events", args.events),
+               Output("--viewer save", rrd)]
+    outputs += [Output(o.label, part_path(o.path), replaceable=False) for o in outputs[2:] if o.path is not None]
+    check_outputs(outputs, inputs, args.force)
     server = thread = None
     tmp = None
     go = threading.Event()
@@ -97,11 +129,31 @@ def record(args) -> int:
         extra = None if args.duration is None else args.duration + 1.0
         thread = threading.Thread(target=server.serve, args=(extra, go), daemon=True)
         thread.start()
-    rec = McapRecorder(out, cfg, port=port)
     acq = Acquisition(port, cfg)
+    live = None
+    try:
+        acq.open()  # a wrong port fails here, before any file exists
+        if not args.no_identify or args.events:
+            live = LiveProcessing(cfg.daq.rate_hz, mode, rrd, args.events, args.window, args.hop, args.bind,
+                                  force=args.force, inputs=inputs, identify=not args.no_identify)
+        try:
+            rec = McapRecorder(out, cfg, port=port, force=args.force, inputs=inputs)
+        except BaseException:
+            if live is not None:
+                live.abort()
+            raise
+        return _record(args, acq, rec, live, out, go)
+    finally:
+        if server is not None:
+            server.stop()
+            thread.join(timeout=5)
+        if tmp is not None:
+            tmp.cleanup()
+
+
+def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | None, out: Path,
+            opened: threading.Event) -> int:
     last_status = [time.monotonic()]
-    live = None if args.no_identify else LiveProcessing(cfg.daq.rate_hz, args.viewer, out.with_suffix(".rrd"),
-                                                         args.events, args.window, args.hop)
 
     def on_block(b):
         rec.write_block(b)
@@ -119,7 +171,7 @@ def record(args) -> int:
             rec.write_status(st)
             if not args.quiet:
                 print(f"\r{st['samples']:9d} samples  {st['dropped_frames']} dropped  {st['crc_errors']} crc  "
-                      f"{st['reconnects']} reconnects", end="", file=sys.stderr, flush=True)
+                      f"{st['reconnects']} reconnects  {st['restarts']} restarts", end="", file=sys.stderr, flush=True)
 
     def on_event(e):
         rec.write_event(e)
@@ -129,9 +181,10 @@ def record(args) -> int:
     acq.on_block = on_block
     acq.on_raw = rec.write_raw
     acq.on_event = on_event
+    acq.on_status = rec.write_device
     _on_signals(acq.stop)
     try:
-        acq.run(args.duration, opened=go)
+        acq.run(args.duration, opened=opened)
     finally:
         if live is not None:
             live.close()
@@ -142,20 +195,18 @@ def record(args) -> int:
                 rec.write_model(m)
         rec.write_status(acq.status())
         rec.close()
-        if server is not None:
-            server.stop()
-            thread.join(timeout=5)
-        if tmp is not None:
-            tmp.cleanup()
     st = acq.status()
     size = out.stat().st_size
     if not args.quiet:
         print(file=sys.stderr)
     per = size / st["samples"] if st["samples"] else float("nan")
-    print(f"{out}: {st['samples']} samples, {st['dropped_frames']} dropped, {st['crc_errors']} CRC errors, "
-          f"{st['reconnects']} reconnects, {size} bytes ({per:.1f} bytes per 3-channel sample)")
-    if live is not None:
+    print(f"{out}: {st['samples']} samples, {st['dropped_frames']} dropped, {st['duplicates']} duplicates, "
+          f"{st['crc_errors']} CRC errors, {st['reconnects']} reconnects, {st['restarts']} device restarts, "
+          f"{size} bytes ({per:.1f} bytes per 3-channel sample)")
+    if live is not None and live.identify:
         print(live.summary())
+    if acq.error:
+        raise ValueError(f"recording stopped: {acq.error}; what came before is kept in {out}")
     return 0
 
 
@@ -174,18 +225,19 @@ class LiveProcessing:
     threads). Latency: from a block's arrival to the model update that includes it.
     """
 
-    def __init__(self, fs_hz: float, viewer_mode: str, rrd_path: Path, events_path: Path | None,
-                 window_s: float = 4.0, hop_s: float = 1.0):
-        import queue
-
-        from ident.live.pipeline import Pipeline, PipelineConfig, rolling_config
-
-        from .eventlog import JsonlEvents
-        from .viewer import RerunViewer
-
+    def __init__(self, fs_hz: float, viewer_mode: str, rrd_path: Path | None, events_path: Path | None,
+                 window_s: float = 4.0, hop_s: float = 1.0, bind: str = DEFAULT_BIND, *, force: bool = False,
+                 inputs=(), identify: bool = True):
+        self.identify = identify
         self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, rolling=rolling_config(fs_hz, window_s, hop_s)))
-        self.viewer = RerunViewer(viewer_mode, rrd_path=rrd_path, fs_hz=fs_hz)
-        self.jsonl = JsonlEvents(events_path) if events_path else None
+        self.jsonl = JsonlEvents(events_path, force=force, inputs=inputs) if events_path else None
+        try:
+            self.viewer = RerunViewer(viewer_mode if identify else "none", rrd_path=rrd_path, fs_hz=fs_hz,
+                                      bind=bind, force=force, inputs=inputs)
+        except BaseException:
+            if self.jsonl:
+                self.jsonl.abort()
+            raise
         self.inq: queue.Queue = queue.Queue()
         self.outq: queue.Queue = queue.Queue()
         self.latencies: list[float] = []
@@ -193,14 +245,14 @@ class LiveProcessing:
         self.busy_s = 0.0
         self.error: str | None = None
         self.thread = threading.Thread(target=self._work, daemon=True)
-        self.thread.start()
+        if identify:
+            self.thread.start()
 
     def submit(self, block) -> None:
-        self.inq.put((time.monotonic(), block.values))
+        if self.identify:
+            self.inq.put((time.monotonic(), block.values))
 
     def _work(self) -> None:
-        from .driver import Event
-
         while True:
             item = self.inq.get()
             if item is None:
@@ -246,16 +298,20 @@ class LiveProcessing:
         if self.jsonl:
             self.jsonl.write({"t": e.t, "kind": e.kind, "message": e.message, **e.data})
 
+    def abort(self) -> None:
+        self.viewer.abort()
+        if self.jsonl:
+            self.jsonl.abort()
+
     def close(self) -> None:
-        self.inq.put(None)
-        self.thread.join(timeout=60)
+        if self.identify:
+            self.inq.put(None)
+            self.thread.join(timeout=60)
         self.viewer.close()
         if self.jsonl:
             self.jsonl.close()
 
     def summary(self) -> str:
-        import numpy as np
-
         lat = np.array(self.latencies)
         p = (f"latency sample -> model update p50 {1e3 * np.percentile(lat, 50):.0f} ms, "
              f"p95 {1e3 * np.percentile(lat, 95):.0f} ms" if lat.size else "no model update")

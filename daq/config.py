@@ -1,27 +1,33 @@
 """The tool's YAML config: the simulated rig (``daq.sim.rig.RigConfig``) plus the ``daq`` section.
 
 One file, validated key by key; any error names the file, the key and what is
-allowed (ident.config.build).
+allowed (ident.config.build). Bounded: a file above ``MAX_CONFIG_BYTES`` (1 MiB) or
+not a regular file is refused before it is read, YAML aliases and anchors and
+nesting deeper than 32 levels are refused while parsing (ident.config.parse_yaml),
+every number must be finite and within its field's range.
 """
 
 from __future__ import annotations
 
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-import yaml
-
-from ident.config import build, to_mapping
+from ident.config import build, parse_yaml, to_mapping
 from .sim.rig import RigConfig
 from .sim.sensors import CHANNELS
+
+MAX_CONFIG_BYTES = 1 << 20
 
 
 @dataclass(frozen=True)
 class Calibration:
     """Counts -> m/s^2 for one channel; ``scale`` None means the nominal ADC step of the sensor."""
 
-    scale_m_per_s2_per_count: float | None = None
-    offset_m_per_s2: float = 0.0
+    scale_m_per_s2_per_count: float | None = field(default=None, metadata={"gt": 0.0, "max": 1e6})
+    offset_m_per_s2: float = field(default=0.0, metadata={"min": -1e6, "max": 1e6})
 
 
 @dataclass(frozen=True)
@@ -37,20 +43,24 @@ class Faults:
 
     corrupt_byte_rate: float = field(default=0.0, metadata={"min": 0.0, "max": 1.0})
     drop_byte_rate: float = field(default=0.0, metadata={"min": 0.0, "max": 1.0})
-    garbage_bursts_per_s: float = field(default=0.0, metadata={"min": 0.0})
-    garbage_burst_bytes: int = field(default=64, metadata={"min": 1})
+    garbage_bursts_per_s: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
+    garbage_burst_bytes: int = field(default=64, metadata={"min": 1, "max": 4096})
     drop_frame_rate: float = field(default=0.0, metadata={"min": 0.0, "max": 1.0})
+    duplicate_frame_rate: float = field(default=0.0, metadata={"min": 0.0, "max": 1.0})  # a frame sent twice
     clock_drift_ppm: float = field(default=0.0, metadata={"min": -10000.0, "max": 10000.0})
-    disconnect_at_s: tuple[float, ...] = ()
-    disconnect_for_s: float = field(default=1.0, metadata={"min": 0.0})
+    disconnect_at_s: tuple[float, ...] = field(default=(), metadata={"min": 0.0, "max": 1e7, "max_len": 1000})
+    disconnect_for_s: float = field(default=1.0, metadata={"min": 0.0, "max": 3600.0})
+    restart_at_s: tuple[float, ...] = field(default=(), metadata={"min": 0.0, "max": 1e7, "max_len": 1000})
+    restart_for_s: float = field(default=0.2, metadata={"min": 0.0, "max": 3600.0})  # boot time: nothing sent
 
 
 @dataclass(frozen=True)
 class DaqConfig:
-    rate_hz: float = field(default=2000.0, metadata={"gt": 0.0, "max": 20000.0})
-    baudrate: int = field(default=921600, metadata={"min": 9600})
+    rate_hz: float = field(default=2000.0, metadata={"min": 1.0, "max": 100_000.0})
+    baudrate: int = field(default=921600, metadata={"min": 9600, "max": 100_000_000})
     flush_s: float = field(default=1.0, metadata={"gt": 0.0, "max": 10.0})
-    reconnect_backoff_s: tuple[float, ...] = (0.05, 0.1, 0.2, 0.5, 1.0)
+    reconnect_backoff_s: tuple[float, ...] = field(default=(0.05, 0.1, 0.2, 0.5, 1.0),
+                                                   metadata={"min": 0.0, "max": 60.0, "max_len": 32})
     calibration: Calibrations = field(default_factory=Calibrations)
     faults: Faults = field(default_factory=Faults)
 
@@ -87,21 +97,34 @@ def parse_config(data: object, source: str) -> Config:
     return Config(rig, daq, source)
 
 
+def read_yaml_file(path: str | Path, what: str = "config file", max_bytes: int = MAX_CONFIG_BYTES) -> Any:
+    """A YAML file as plain data, bounded: a regular file of at most ``max_bytes``, no aliases or
+    anchors, nesting at most 32 deep; one-line ValueError naming the file otherwise."""
+    p = Path(path)
+    try:
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # a FIFO must not block the open
+    except FileNotFoundError:
+        raise ValueError(f"{p}: {what} not found") from None
+    except OSError as exc:
+        raise ValueError(f"{p}: cannot read {what}: {exc.strerror}") from None
+    with os.fdopen(fd, "rb") as fh:
+        st = os.fstat(fh.fileno())
+        if not stat.S_ISREG(st.st_mode):
+            raise ValueError(f"{p}: not a regular file; give a YAML {what}")
+        if st.st_size > max_bytes:
+            raise ValueError(f"{p}: {st.st_size} bytes; a {what} may hold at most {max_bytes} bytes")
+        raw = fh.read(max_bytes + 1)
+    if len(raw) > max_bytes:
+        raise ValueError(f"{p}: more than {max_bytes} bytes; a {what} may hold at most {max_bytes} bytes")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ValueError(f"{p}: not UTF-8 text; give a YAML {what}") from None
+    return parse_yaml(text, str(p))
+
+
 def load_config(path: str | Path | None) -> Config:
     """Read and validate a config file; ``None`` gives the defaults."""
     if path is None:
         return Config(RigConfig(), DaqConfig())
-    p = Path(path)
-    try:
-        text = p.read_text()
-    except FileNotFoundError:
-        raise ValueError(f"{p}: config file not found") from None
-    except OSError as exc:
-        raise ValueError(f"{p}: cannot read config: {exc.strerror}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark else ""
-        raise ValueError(f"{p}: not valid YAML{where}: {getattr(exc, 'problem', exc)}") from None
-    return parse_config(data, str(p))
+    return parse_config(read_yaml_file(path), str(path))

@@ -15,27 +15,39 @@ Channels (JSON schema encoding, readable by Foxglove and PlotJuggler):
 - ``/rig/status`` (``rig.Status``): counters and clock estimates once a second.
 - ``/rig/model`` (``rig.Model``): every rolling window's model per beam: equations,
   coefficients, active set, integration NRMSE, identified natural frequency.
+- ``/rig/device`` (``rig.Device``): every status frame of the device (device id, session id,
+  firmware, protocol, rate, counter, device time): who was recorded, and each boot.
 
 The resolved config is stored as metadata ``config`` (YAML text) and as the
 attachment ``config.yaml``; the calibration as metadata ``calibration``.
 
-Crash safety: chunks are zstd-compressed and closed every ``flush_s`` (1 s)
-by ``Writer.flush()``, so after kill -9 or power loss at most the last second
-is missing and ``replay recover`` rebuilds an indexed file from the rest.
+Crash safety: the file is written as ``NAME.part`` and renamed to ``NAME`` when
+closed (daq.safeio.PartFile), so a crash leaves a ``.part`` and never a half-written
+``NAME``. Chunks are zstd-compressed and closed every ``flush_s`` (1 s) of host time
+or of samples, whichever comes first, so after kill -9 or power loss at most the last
+second is missing and ``replay recover`` rebuilds an indexed file from the rest.
+After every chunk the schema and channel records are written again (top level, about
+1.5 kB): a recovery that loses the header, the first chunk and the summary still
+knows every channel.
 """
 
 from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 import yaml
+from mcap.data_stream import RecordBuilder
+from mcap.records import Channel, Schema
 from mcap.writer import CompressionType, Writer
 
 from .config import Config
 from .driver import Event, SampleBlock
+from .protocol import Status
+from .safeio import PartFile
 
 ACCEL_SCHEMA = {
     "type": "object",
@@ -64,6 +76,19 @@ LOG_SCHEMA = {
     },
 }
 STATUS_SCHEMA = {"type": "object", "title": "rig.Status", "additionalProperties": True}
+DEVICE_SCHEMA = {
+    "type": "object",
+    "title": "rig.Device",
+    "properties": {
+        "device_id": {"type": "string", "description": "unit id, hex"},
+        "session_id": {"type": "string", "description": "random per boot, hex"},
+        "firmware": {"type": "string"},
+        "protocol": {"type": "integer"},
+        "rate_hz": {"type": "number"},
+        "counter": {"type": "integer", "description": "status frames since boot"},
+        "t_device": {"type": "number", "description": "device clock [s] since boot"},
+    },
+}
 MODEL_SCHEMA = {
     "type": "object",
     "title": "rig.Model",
@@ -79,23 +104,38 @@ MODEL_SCHEMA = {
 }
 LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
 TOPICS = {"accel": "/rig/accel", "raw": "/rig/raw", "events": "/rig/events", "status": "/rig/status",
-          "model": "/rig/model"}
+          "model": "/rig/model", "device": "/rig/device"}
+CHUNK_BYTES = 64 * 1024 * 1024  # chunks are closed by time (flush_s), this only bounds a runaway one
 
 
 class McapRecorder:
-    def __init__(self, path: str | Path, config: Config, *, port: str = "", flush_s: float | None = None):
+    """The live MCAP sink. ``path`` is the final name; until :meth:`close` the data is in ``path.part``.
+
+    ``inputs`` and ``force`` are checked as daq.safeio.check_outputs does (the command checks them
+    first; this repeats the check at the rename).
+    """
+
+    def __init__(self, path: str | Path, config: Config, *, port: str = "", flush_s: float | None = None,
+                 force: bool = False, inputs: Iterable[str | Path | None] = ()):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = open(self.path, "wb")
-        self._w = Writer(self._fh, chunk_size=4 * 1024 * 1024, compression=CompressionType.ZSTD)
+        self._out = PartFile(self.path, inputs=inputs, force=force, label="-o")
+        self._fh = self._out.file
+        self._w = Writer(self._fh, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD)
         self._w.start(profile="", library="shaker-ident daq")
         ids = {}
+        self._records: list = []  # schema and channel records, repeated after every chunk
         for key, schema in (("accel", ACCEL_SCHEMA), ("events", LOG_SCHEMA), ("status", STATUS_SCHEMA),
-                            ("model", MODEL_SCHEMA)):
-            sid = self._w.register_schema(schema["title"], "jsonschema", json.dumps(schema).encode())
+                            ("model", MODEL_SCHEMA), ("device", DEVICE_SCHEMA)):
+            data = json.dumps(schema).encode()
+            sid = self._w.register_schema(schema["title"], "jsonschema", data)
             ids[key] = self._w.register_channel(TOPICS[key], "json", sid)
-        ids["raw"] = self._w.register_channel(TOPICS["raw"], "application/octet-stream", 0,
-                                              metadata={"format": "daq.protocol v1 frames, 24 bytes"})
+            self._records += [Schema(id=sid, name=schema["title"], encoding="jsonschema", data=data),
+                              Channel(id=ids[key], topic=TOPICS[key], message_encoding="json", schema_id=sid,
+                                      metadata={})]
+        raw_meta = {"format": "daq.protocol v1 frames: 24-byte data frames, 36-byte status frames"}
+        ids["raw"] = self._w.register_channel(TOPICS["raw"], "application/octet-stream", 0, metadata=raw_meta)
+        self._records.append(Channel(id=ids["raw"], topic=TOPICS["raw"], message_encoding="application/octet-stream",
+                                     schema_id=0, metadata=raw_meta))
         self._ch = ids
         text = yaml.safe_dump(config.to_mapping(), sort_keys=False)
         now = time.time_ns()
@@ -108,6 +148,8 @@ class McapRecorder:
                                          "started_ns": str(now)})
         self._w.add_attachment(now, now, "config.yaml", "application/yaml", text.encode())
         self._flush_s = config.daq.flush_s if flush_s is None else flush_s
+        self._flush_samples = max(1, int(self._flush_s * config.daq.rate_hz))
+        self._since_flush = 0
         self._last_flush = time.monotonic()
         self._anchor_ns: int | None = None  # host epoch ns at device time 0
         self._seq = {k: 0 for k in ids}
@@ -126,11 +168,12 @@ class McapRecorder:
         self._maybe_flush()
 
     def write_block(self, b: SampleBlock) -> None:
+        """Samples; log time = the host time of the first sample + the timeline (monotonic across restarts)."""
         if not len(b):
             return
         if self._anchor_ns is None:
-            self._anchor_ns = b.host_ns - int(round(float(b.t_device_s[0]) * 1e9))
-        log_ns = self._anchor_ns + np.rint(b.t_device_s * 1e9).astype(np.int64)
+            self._anchor_ns = b.host_ns - int(round(float(b.t_s[0]) * 1e9))
+        log_ns = self._anchor_ns + np.rint(np.asarray(b.t_s) * 1e9).astype(np.int64)
         v = b.values
         for i in range(len(b)):
             msg = (f'{{"seq":{int(b.seq[i])},"t_device":{b.t_device_s[i]:.6f},"base":{v[i, 0]:.6g},'
@@ -140,7 +183,12 @@ class McapRecorder:
             self._first_seq = int(b.seq[0])
         self._last_seq = int(b.seq[-1])
         self.samples += len(b)
+        self._since_flush += len(b)
         self._maybe_flush()
+
+    def write_device(self, status: Status, host_ns: int) -> None:
+        """One status frame of the device."""
+        self._add("device", host_ns, host_ns, json.dumps(status.as_dict()).encode())
 
     def write_event(self, e: Event, host_ns: int | None = None) -> None:
         ns = time.time_ns() if host_ns is None else host_ns
@@ -159,21 +207,34 @@ class McapRecorder:
         self._add("status", ns, ns, json.dumps(status).encode())
 
     def _maybe_flush(self) -> None:
-        if time.monotonic() - self._last_flush >= self._flush_s:
+        if self._since_flush >= self._flush_samples or time.monotonic() - self._last_flush >= self._flush_s:
             self.flush()
 
     def flush(self) -> None:
-        """Close the chunk in progress and push it to the OS (survives a killed process)."""
+        """Close the chunk in progress and push it to the OS (survives a killed process); then repeat the
+        schema and channel records, so every chunk has them close by."""
         self._w.flush()
+        rb = RecordBuilder()
+        for r in self._records:
+            r.write(rb)
+        self._fh.write(rb.end())
+        self._fh.flush()
         self._last_flush = time.monotonic()
+        self._since_flush = 0
 
-    def close(self) -> None:
+    def abort(self) -> None:
+        """Remove the ``.part`` of a recording that never started."""
+        self.closed = True
+        self._out.abort()
+
+    def close(self) -> Path:
+        """Finish the file (summary, footer) and rename ``NAME.part`` to ``NAME``; returns ``NAME``."""
         if self.closed:
-            return
+            return self.path
         self.closed = True
         if self._first_seq is not None:
-            # the recorded range, so that re-decoding /rig/raw gives exactly the samples of /rig/accel
+            # the recorded frames are the first ``count`` data frames that decoding /rig/raw gives
             self._w.add_metadata("samples", {"first_seq": str(self._first_seq), "last_seq": str(self._last_seq),
                                              "count": str(self.samples)})
         self._w.finish()
-        self._fh.close()
+        return self._out.commit()

@@ -17,23 +17,43 @@ Entities (all on the timeline ``time``, seconds since the start of the stream):
 
 Modes: ``auto`` (``spawn`` in an interactive terminal, else ``none``),
 ``spawn`` (the native viewer, where there is a display; else ``web``),
-``web`` (gRPC server plus the web viewer on localhost, URL printed), ``save``
-(an .rrd file), ``none``.
+``web`` (gRPC server plus the web viewer, URL printed), ``save``
+(an .rrd file, written as ``.rrd.part`` and renamed when complete), ``none``.
+
+Binding: rerun 0.41's in-process servers (``rr.serve_grpc``, ``rr.serve_web_viewer``, ``rr.spawn``)
+take a port but no address and listen on every interface. So the servers run in the ``rerun``
+executable, which takes ``--bind``: ``rerun --serve-web --bind ADDR`` (web) or ``rerun --bind ADDR``
+(native viewer), on 127.0.0.1 unless ``--bind`` says otherwise, and the recording stream connects to
+them as a client (``connect_grpc``); this process listens on nothing. The URL printed opens the live
+recording directly: ``http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A9876%2Fproxy``
+(the form the rerun executable itself prints).
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import signal
+import socket
+import subprocess
 import sys
+import time
 from pathlib import Path
+from urllib.parse import quote
 
 import numpy as np
+
+from ident.embedding import acf_delay
+
+from .safeio import PartFile
 
 CHANNELS = ("base", "tip1", "tip2")
 PHASE_DELAY_S = 1 / (4 * 12.3)  # fallback: a quarter period of the rig's excitation
 PHASE_SPAN_S = 2.0
 PHASE_EVERY_S = 0.2  # refresh the portrait five times per second of stream time
 VIEWER_MODES = ("auto", "spawn", "web", "save", "none")
+GRPC_PORT, WEB_PORT = 9876, 9090
+DEFAULT_BIND = "127.0.0.1"
 
 
 def blueprint():
@@ -74,16 +94,81 @@ def _has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) or sys.platform == "darwin"
 
 
+def _rerun_exe() -> str:
+    exe = os.path.join(os.path.dirname(sys.executable), "rerun")
+    if os.path.exists(exe):
+        return exe
+    found = shutil.which("rerun")
+    if not found:
+        raise ValueError("the rerun executable (pip package rerun-sdk) was not found; use --viewer save or none")
+    return found
+
+
+def _host(bind: str) -> str:
+    """The address to connect to a server bound to ``bind``, as it goes in a URL."""
+    host = "127.0.0.1" if bind in ("0.0.0.0", "", "::") else bind
+    return f"[{host}]" if ":" in host else host
+
+
+def _family(bind: str) -> int:
+    return socket.AF_INET6 if ":" in bind else socket.AF_INET
+
+
+def port_free(bind: str, port: int) -> bool:
+    with socket.socket(_family(bind), socket.SOCK_STREAM) as s:
+        try:
+            s.bind((bind, port))
+        except OSError:
+            return False
+    return True
+
+
+def free_port(bind: str, preferred: int) -> int:
+    """``preferred`` if it can be bound on ``bind``, else a free port the system picks."""
+    if port_free(bind, preferred):
+        return preferred
+    with socket.socket(_family(bind), socket.SOCK_STREAM) as s:
+        s.bind((bind, 0))
+        return s.getsockname()[1]
+
+
+def _wait_listening(host: str, port: int, proc: subprocess.Popen, timeout_s: float = 20.0) -> None:
+    end = time.monotonic() + timeout_s
+    addr = host.strip("[]")
+    while time.monotonic() < end:
+        if proc.poll() is not None:
+            raise ValueError(f"the rerun viewer exited at start (code {proc.returncode}); use --viewer save or none")
+        try:
+            with socket.create_connection((addr, port), timeout=0.5):
+                return
+        except OSError:
+            time.sleep(0.1)
+    raise ValueError(f"the rerun viewer did not listen on {addr}:{port} within {timeout_s:.0f} s")
+
+
+def resolve_mode(mode: str) -> str:
+    """``auto``: show it to a person at a terminal (native viewer with a display, else web); stay quiet in
+    scripts, tests and CI."""
+    if mode not in VIEWER_MODES:
+        raise ValueError(f"unknown viewer {mode!r}; choose one of {', '.join(VIEWER_MODES)}")
+    if mode == "auto":
+        mode = "spawn" if sys.stdout.isatty() and sys.stdin.isatty() else "none"
+    if mode == "spawn" and not _has_display():
+        mode = "web"
+    return mode
+
+
 class RerunViewer:
     def __init__(self, mode: str, *, name: str = "shaker-rig", rrd_path: str | Path | None = None,
-                 fs_hz: float = 2000.0):
-        if mode not in VIEWER_MODES:
-            raise ValueError(f"unknown viewer {mode!r}; choose one of {', '.join(VIEWER_MODES)}")
-        if mode == "auto":  # show it to a person at a terminal; stay quiet in scripts, tests and CI
-            mode = "spawn" if sys.stdout.isatty() and sys.stdin.isatty() else "none"
+                 fs_hz: float = 2000.0, bind: str = DEFAULT_BIND, force: bool = False, inputs=()):
+        asked = mode
+        mode = resolve_mode(mode)
         self.mode = mode
         self.fs_hz = fs_hz
         self.url = None
+        self.bind = bind
+        self._proc: subprocess.Popen | None = None
+        self._rrd: PartFile | None = None
         self._rel = np.zeros((0,))
         self._rel_t = np.zeros((0,))
         self._first = np.zeros((0,))  # the first seconds, for the core's choice of delay
@@ -98,21 +183,36 @@ class RerunViewer:
         self.rr = rr
         self.rec = rr.RecordingStream(name)
         bp = blueprint()
-        if mode == "spawn" and not _has_display():
-            mode = self.mode = "web"
+        if mode == "web" and asked == "spawn":
             print("no display: serving the web viewer instead", file=sys.stderr)
+        host = _host(bind)
         if mode == "spawn":
-            self.rec.spawn(default_blueprint=bp)
+            port = GRPC_PORT
+            if port_free(bind, port):  # else a viewer already listens there: use it, as rr.spawn does
+                self._proc = subprocess.Popen([_rerun_exe(), "--bind", bind, "--port", str(port)],
+                                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                              start_new_session=True)
+                _wait_listening(host, port, self._proc)
+            self.rec.connect_grpc(f"rerun+http://{host}:{port}/proxy", default_blueprint=bp)
         elif mode == "web":
-            uri = self.rec.serve_grpc(default_blueprint=bp)
-            rr.serve_web_viewer(connect_to=uri, open_browser=False)
-            self.url = uri
-            print(f"web viewer on http://localhost:9090 (data at {uri})", file=sys.stderr)
+            grpc, web = free_port(bind, GRPC_PORT), free_port(bind, WEB_PORT)
+            self._proc = subprocess.Popen([_rerun_exe(), "--serve-web", "--bind", bind, "--port", str(grpc),
+                                           "--web-viewer-port", str(web)],
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+            _wait_listening(host, grpc, self._proc)
+            _wait_listening(host, web, self._proc)
+            data = f"rerun+http://{host}:{grpc}/proxy"
+            self.rec.connect_grpc(data, default_blueprint=bp)
+            self.url = f"http://{host}:{web}/?url={quote(data, safe='')}"
+            print(f"web viewer: {self.url} (listening on {bind} only; --bind ADDR to change)", file=sys.stderr,
+                  flush=True)
         else:
             if rrd_path is None:
                 raise ValueError("--viewer save needs a file name for the .rrd")
             self.rrd_path = Path(rrd_path)
-            self.rec.save(str(self.rrd_path), default_blueprint=bp)
+            self._rrd = PartFile(self.rrd_path, inputs=inputs, force=force, label="--viewer save")
+            self._rrd.file.close()  # rerun writes the file itself
+            self.rec.save(str(self._rrd.part), default_blueprint=bp)
 
     def _time(self, t: np.ndarray):
         return [self.rr.TimeColumn("time", duration=np.asarray(t, float))]
@@ -163,8 +263,6 @@ class RerunViewer:
             if len(self._first) < int(PHASE_SPAN_S * self.fs_hz):
                 return
             try:  # the core's choice: first zero of the autocorrelation
-                from ident.embedding import acf_delay
-
                 self._delay = acf_delay(self._first)
             except ValueError:
                 self._delay = max(1, int(round(PHASE_DELAY_S * self.fs_hz)))
@@ -179,8 +277,35 @@ class RerunViewer:
         self.rec.set_time("time", duration=float(self._rel_t[-1]))
         self.rec.log("phase/tip1", self.rr.LineStrips3D([pts]))
 
+    def _stop_server(self, sig: int = signal.SIGTERM) -> None:
+        """End the web server: its whole process group (the ``rerun`` script runs the viewer binary as a child)."""
+        proc, self._proc = self._proc, None
+        try:
+            os.killpg(proc.pid, sig)
+            proc.wait(timeout=5)
+        except ProcessLookupError:
+            return
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=5)
+
+    def abort(self) -> None:
+        """Stop the servers and remove an unfinished .rrd (the command failed before it started)."""
+        if self.rec is not None:
+            self.rec.disconnect()
+        if self._rrd is not None:
+            self._rrd.abort()
+            self._rrd = None
+        if self._proc is not None and self.mode == "web":
+            self._stop_server(signal.SIGKILL)
+
     def close(self) -> None:
         if self.rec is not None:
             self.rec.flush()
-            if self.mode == "save":
+            if self.mode in ("save", "web"):
                 self.rec.disconnect()
+            if self._rrd is not None:
+                self._rrd.commit()
+                self._rrd = None
+        if self._proc is not None and self.mode == "web":  # the web server lives as long as the command
+            self._stop_server()

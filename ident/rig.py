@@ -48,8 +48,8 @@ class Beam:
     mass_kg: float = field(default=0.040, metadata={"gt": 0.0})
     natural_frequency_hz: float = field(default=11.2, metadata={"gt": 0.0, "max": 1000.0})  # uncoupled
     damping_ratio: float = field(default=0.03, metadata={"min": 0.0, "max": 1.0})
-    gap_pos_m: float = field(default=2.7e-3, metadata={"gt": 0.0})  # + side stopper; inf = none
-    gap_neg_m: float = field(default=2.7e-3, metadata={"gt": 0.0})  # - side (a distance); inf = none
+    gap_pos_m: float = field(default=2.7e-3, metadata={"gt": 0.0, "inf_ok": True})  # + side stopper; inf = none
+    gap_neg_m: float = field(default=2.7e-3, metadata={"gt": 0.0, "inf_ok": True})  # - side (a distance); inf = none
     stopper_stiffness_n_per_m: float = field(default=1.0e5, metadata={"min": 0.0})
     stopper_damping_n_s_per_m: float = field(default=2.0, metadata={"min": 0.0})
     cubic_stiffness_n_per_m3: float = 0.0  # positive hardens

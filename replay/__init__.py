@@ -1,4 +1,5 @@
-"""replay: reading recordings, recovering broken ones, and (with its issue) playback.
+"""replay: recordings after the fact: formats (one module per format, one suffix table), paced playback
+through the live pipeline, recovery of damaged files, and the ``replay`` command.
 
 May import ident and daq.
 """

@@ -1,10 +1,14 @@
 """``replay``: play recordings through the live pipeline; info, export, import, recover.
 
-    replay FILE [--rate X | --max] [--start S] [--duration D] [--loop] [--viewer MODE] [--events OUT.jsonl]
+    replay [play] FILE [--rate X | --max] [--start S] [--duration D] [--loop] [--viewer MODE] [--events OUT.jsonl]
     replay info FILE
-    replay export FILE --csv OUT
-    replay import IN.csv -o OUT.mcap [--time COL | --fs HZ] [--base COL] [--tip1 COL] [--tip2 COL]
+    replay export FILE (--csv OUT.csv | --mat OUT.mat | -o OUT.{csv,mat})
+    replay import IN.{csv,mat} -o OUT.mcap [--time COL | --fs HZ] [--base COL] [--tip1 COL] [--tip2 COL]
     replay recover BROKEN -o FIXED
+
+``replay FILE ...`` is ``replay play FILE ...``: options may come before or after the file. Every
+output is checked before anything is read or created (daq.safeio) and written atomically; ``--force``
+replaces an existing output, never an input.
 """
 
 from __future__ import annotations
@@ -12,32 +16,44 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-import time
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
-from daq.cli import add_live_options
-from ident.cli import OneLineParser, run_guarded
+from daq.cli import add_live_options, check_live, model_records
+from daq.eventlog import JsonlEvents
+from daq.recorder import TOPICS
+from daq.safeio import Output, check_outputs, part_path
+from daq.viewer import RerunViewer, resolve_mode
+from ident.cli import OFFSET, PLAY_RATE, RATE_HZ, DURATION, OneLineParser, run_guarded
+
+from . import formats
+from .formats.mcap import read_recording
+from .play import play
+from .recover import recover
 
 VERBS = ("info", "export", "import", "recover", "play")
+TOP_LEVEL = ("-h", "--help", "--version")
 
 
 def _csv_options(p) -> None:
     g = p.add_argument_group("CSV input")
-    g.add_argument("--time", dest="time_col", help="column of times in seconds")
-    g.add_argument("--fs", type=float, dest="fs_hz", help="sampling rate, when there is no time column")
+    g.add_argument("--time", dest="time_col", help="column of times in seconds (found by itself when named t, time, "
+                                                   "time_s or t_s)")
+    g.add_argument("--fs", type=RATE_HZ, dest="fs_hz", help="sampling rate, when there is no time column")
     g.add_argument("--base", default="base", help="column of the base acceleration (default base)")
     g.add_argument("--tip1", default="tip1", help="column of tip 1 (default tip1)")
     g.add_argument("--tip2", default="tip2", help="column of tip 2 (default tip2)")
 
 
-def _csv_kw(args) -> dict:
-    if Path(args.file).suffix.lower() != ".csv":
+def _read_options(args) -> dict:
+    """Reading options for the input's format (CSV/MAT columns and times; a recording takes none)."""
+    if formats.format_of(args.file) is formats.mcap:
+        if args.time_col is not None or args.fs_hz is not None:
+            raise ValueError("--time and --fs are for CSV and MAT files; a recording carries its own times")
         return {}
-    return {"time_col": args.time_col, "fs_hz": args.fs_hz, "base": args.base, "tip1": args.tip1,
-            "tip2": args.tip2}
+    return {"time_col": args.time_col, "fs_hz": args.fs_hz, "base": args.base, "tip1": args.tip1, "tip2": args.tip2}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -46,49 +62,62 @@ def build_parser() -> argparse.ArgumentParser:
     pl = sub.add_parser("play", help="play a recording or CSV through the live pipeline (the default verb)")
     pl.add_argument("file")
     pace = pl.add_mutually_exclusive_group()
-    pace.add_argument("--rate", type=float, default=1.0, help="playback speed, 1 = recorded time (default)")
+    pace.add_argument("--rate", type=PLAY_RATE, default=1.0, help="playback speed, 1 = recorded time (default)")
     pace.add_argument("--max", action="store_true", help="as fast as possible")
-    pl.add_argument("--start", type=float, default=0.0, help="start this many seconds into the data")
-    pl.add_argument("--duration", type=float, help="play this many seconds")
+    pl.add_argument("--start", type=OFFSET, default=0.0, help="start this many seconds into the data")
+    pl.add_argument("--duration", type=DURATION, help="play this many seconds")
     pl.add_argument("--loop", action="store_true", help="start again at the end, until Ctrl-C")
     add_live_options(pl, "the input")
     pl.add_argument("--rrd", type=Path, help="with --viewer save: the .rrd to write")
     pl.add_argument("--models", type=Path, help="write each window's model (per beam) as JSON lines here")
+    pl.add_argument("--force", action="store_true", help="replace existing output files")
     _csv_options(pl)
     pl.set_defaults(func=play_cmd)
 
-    i = sub.add_parser("info", help="duration, rate, channels, drops, events")
+    i = sub.add_parser("info", help="duration, rate, device, drops, damage, clock, events")
     i.add_argument("file")
     i.set_defaults(func=info_cmd)
-    e = sub.add_parser("export", help="export samples as CSV")
+    e = sub.add_parser("export", help="export the recorded samples as CSV or MAT")
     e.add_argument("file")
-    e.add_argument("--csv", type=Path, required=True)
+    out = e.add_mutually_exclusive_group(required=True)
+    out.add_argument("--csv", type=Path, help="CSV to write: t,seq,base,tip1,tip2")
+    out.add_argument("--mat", type=Path, help="MAT file to write: t, seq, base, tip1, tip2, Fs")
+    out.add_argument("-o", "--output", type=Path, help="file to write, format by suffix (.csv, .mat)")
+    e.add_argument("--force", action="store_true", help="replace an existing output")
     e.set_defaults(func=export_cmd)
-    im = sub.add_parser("import", help="turn a CSV from another DAQ into an MCAP recording")
+    im = sub.add_parser("import", help="turn a CSV or MAT file from another DAQ into an MCAP recording")
     im.add_argument("file")
     im.add_argument("-o", "--output", type=Path, required=True)
+    im.add_argument("--force", action="store_true", help="replace an existing output")
     _csv_options(im)
     im.set_defaults(func=import_cmd)
-    r = sub.add_parser("recover", help="rebuild a readable MCAP file from a truncated one")
-    r.add_argument("broken", type=Path)
+    r = sub.add_parser("recover", help="rebuild a readable MCAP file from a truncated or damaged one")
+    r.add_argument("file", type=Path)
     r.add_argument("-o", "--output", type=Path, required=True)
+    r.add_argument("--force", action="store_true", help="replace an existing output (never the input)")
     r.set_defaults(func=recover_cmd)
     return p
 
 
 def play_cmd(args) -> int:
-    from daq.cli import model_records
-    from daq.eventlog import JsonlEvents
-    from daq.viewer import RerunViewer
-
-    from .play import play
-    from .sources import open_samples
-
-    samples = open_samples(args.file, **_csv_kw(args))
-    rrd = args.rrd or Path(args.file).with_suffix(".rrd")
-    viewer = RerunViewer(args.viewer, rrd_path=rrd, fs_hz=samples.fs_hz)
-    events = JsonlEvents(args.events) if args.events else None
-    models = JsonlEvents(args.models) if args.models else None
+    check_live(args)
+    mode = resolve_mode(args.viewer)
+    rrd = (args.rrd or Path(args.file).with_suffix(".rrd")) if mode == "save" else None
+    outputs = [Output("--events", args.events), Output("--models", args.models), Output("--viewer save", rrd)]
+    outputs += [Output(o.label, part_path(o.path), replaceable=False) for o in list(outputs) if o.path is not None]
+    check_outputs(outputs, [args.file], args.force)
+    samples = formats.read_samples(args.file, **_read_options(args))
+    events = JsonlEvents(args.events, force=args.force, inputs=[args.file]) if args.events else None
+    models = (JsonlEvents(args.models, force=args.force, inputs=[args.file], label="--models")
+              if args.models else None)
+    try:
+        viewer = RerunViewer(mode, rrd_path=rrd, fs_hz=samples.fs_hz, bind=args.bind, force=args.force,
+                             inputs=[args.file])
+    except BaseException:
+        for sink in (events, models):
+            if sink:
+                sink.abort()
+        raise
     counts: Counter = Counter()
     stopped = [False]
 
@@ -122,86 +151,134 @@ def play_cmd(args) -> int:
         if models:
             models.close()
     speed = rep.stream_s / rep.wall_s if rep.wall_s > 0 else float("inf")
+    filled = int(np.count_nonzero(samples.filled))
     print(f"played {rep.stream_s:.2f} s of data in {rep.wall_s:.2f} s ({speed:.1f} x real time); events: "
           + (", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "none")
-          + (f"; viewer saved to {rrd}" if args.viewer == "save" else ""))
+          + (f"; {filled} lost frame(s) filled by interpolation" if filled else "")
+          + (f"; viewer saved to {rrd}" if mode == "save" else ""))
     return 0
+
+
+def _ranges(text: str) -> list[tuple[int, int]]:
+    out = []
+    for part in filter(None, text.split(",")):
+        a, _, b = part.partition("-")
+        if a.isdigit() and b.isdigit():
+            out.append((int(a), int(b)))
+    return out
+
+
+def sequence_report(seq: np.ndarray, t_device: np.ndarray, lost_to_damage: list[tuple[int, int]]) -> dict:
+    """Gaps in recorded sequence numbers: device drops, frames lost to file damage, device restarts."""
+    step = np.diff(seq)
+    back = (step <= 0) | (np.diff(t_device) < 0)
+    gap = np.where(back, 0, step - 1)
+    damage = np.zeros(gap.size, bool)
+    for a, b in lost_to_damage:
+        damage |= (seq[:-1] + 1 == a) & (seq[1:] - 1 == b)
+    dev = (gap > 0) & ~damage
+    return {"drops": int(gap[dev].sum()), "drop_gaps": int(dev.sum()), "damage": int(gap[damage].sum()),
+            "damage_gaps": int(damage.sum()), "restarts": int(back.sum())}
 
 
 def info_cmd(args) -> int:
     path = Path(args.file)
-    if path.suffix.lower() == ".csv":
-        raise ValueError("info reads MCAP recordings; for a CSV, use replay import first")
-    from .reader import read_recording
-
+    if formats.format_of(path) is not formats.mcap:
+        raise ValueError("info reads MCAP recordings; for a CSV or MAT file, use replay import first")
     rec = read_recording(path, raw=False)
-    gaps = np.diff(rec.seq)
-    lost = int(np.sum(gaps[gaps > 1] - 1)) if len(gaps) else 0
-    kinds = Counter(e.get("kind", "?") for e in rec.events)
     print(f"file       {path}")
     print(f"samples    {len(rec.seq)}")
-    print(f"duration   {rec.duration_s:.3f} s")
-    print(f"rate       {rec.rate_hz:.3f} Hz")
-    print("channels   base, tip1, tip2 [m/s^2] (/rig/accel)")
-    print(f"drops      {lost} frame(s) in {int(np.count_nonzero(gaps > 1))} gap(s)")
+    if len(rec.seq) < 2:
+        print("duration   - (fewer than two samples)")
+        print("rate       - (fewer than two samples)")
+    else:
+        print(f"duration   {rec.duration_s:.3f} s")
+        print(f"rate       {rec.rate_hz:.3f} Hz")
+    print(f"channels   base, tip1, tip2 [m/s^2] ({TOPICS['accel']})")
+    if rec.devices:
+        d0, d1 = rec.devices[0], rec.devices[-1]
+        sessions = len({d["session_id"] for d in rec.devices})
+        print(f"device     {d0['device_id']}, firmware {d0['firmware']}, protocol {d0['protocol']}, "
+              f"{d0['rate_hz']:g} Hz; {sessions} session(s) (last {d1['session_id']})")
+    recovery = rec.metadata.get("recovery", {})
+    rep = sequence_report(rec.seq, rec.t_device, _ranges(recovery.get("lost_seq", "")))
+    print(f"drops      {rep['drops']} frame(s) in {rep['drop_gaps']} gap(s) (lost by the device or the link)")
+    if rec.status and rec.status[-1].get("duplicates"):
+        print(f"duplicates {rec.status[-1]['duplicates']} frame(s) received twice, kept once")
+    if rep["restarts"]:
+        print(f"restarts   {rep['restarts']} device restart(s): sequence or device time went back")
+    if recovery:
+        damage = recovery.get("damage", "")
+        print(f"damage     recovered from {recovery.get('source', '?')}: {len([d for d in damage.split(';') if d])} "
+              f"damaged region(s); {rep['damage']} frame(s) lost with them in {rep['damage_gaps']} gap(s)")
+    kinds = Counter(e.get("kind", "?") for e in rec.events)
     print("events     " + (", ".join(f"{k} {v}" for k, v in sorted(kinds.items())) or "none"))
     if rec.status:
         st = rec.status[-1]
-        print(f"link       {st.get('crc_errors', 0)} CRC errors, {st.get('reconnects', 0)} reconnects, clock drift "
-              f"{st.get('clock_drift_ppm')} ppm")
+        print(f"link       {st.get('crc_errors', 0)} CRC errors, {st.get('reconnects', 0)} reconnects")
+        print("clock      " + _clock_text(st))
     return 0
 
 
-def export_cmd(args) -> int:
-    from .reader import read_recording
+def _clock_text(st: dict) -> str:
+    ratio = st.get("device_rate_ratio")
+    drift = st.get("clock_drift_ppm")
+    if ratio is None and drift is not None:  # recordings before the ratio was kept
+        ratio = 1.0 + drift * 1e-6
+    if ratio is None or not np.isfinite(ratio):
+        return "drift - (too few reads to estimate)"
+    if abs(ratio - 1.0) > 0.05:
+        return (f"drift - (not a real-time source: the device's clock ran {1 / ratio:.1f} x the host's, "
+                f"e.g. rig:// without realtime=1)")
+    return f"drift {(ratio - 1.0) * 1e6:+.1f} ppm (host seconds per device second, minus 1)"
 
-    rec = read_recording(args.file, raw=False)
-    args.csv.parent.mkdir(parents=True, exist_ok=True)
-    t = rec.t_device - (rec.t_device[0] if len(rec.t_device) else 0.0)
-    data = np.column_stack([t, rec.seq, rec.values])
-    np.savetxt(args.csv, data, delimiter=",", header="t,seq,base,tip1,tip2", comments="",
-               fmt=["%.6f", "%d", "%.6g", "%.6g", "%.6g"])
-    print(f"{args.csv}: {len(rec.seq)} rows (t in s from the first sample, accelerations in m/s^2)")
+
+def export_cmd(args) -> int:
+    out, label = ((args.csv, "--csv") if args.csv else (args.mat, "--mat") if args.mat else (args.output, "-o"))
+    module = formats.format_of(out)
+    if module is formats.mcap:
+        raise ValueError(f"{label} {out}: export writes CSV or MAT; the input already is a recording")
+    check_outputs([Output(label, out)], [args.file], args.force)
+    samples = formats.read_samples(args.file, fill=False)
+    module.write_samples(out, samples, force=args.force, inputs=[args.file], label=label)
+    print(f"{out}: {int(np.count_nonzero(~samples.filled))} rows (t in s from the first sample, "
+          f"accelerations in m/s^2)")
     return 0
 
 
 def import_cmd(args) -> int:
-    from daq.config import Config, DaqConfig
-    from daq.driver import SampleBlock
-    from daq.recorder import McapRecorder
-    from daq.sim.rig import RigConfig
-
-    from .sources import read_csv
-
-    s = read_csv(args.file, time_col=args.time_col, fs_hz=args.fs_hz, base=args.base, tip1=args.tip1,
-                 tip2=args.tip2)
-    cfg = Config(RigConfig(), DaqConfig(rate_hz=s.fs_hz), source=f"imported from {args.file}")
-    rec = McapRecorder(args.output, cfg, port=f"import:{args.file}", flush_s=3600.0)
-    n = len(s.t)
-    now = time.time_ns()
-    for k in range(0, n, 2000):
-        e = min(n, k + 2000)
-        rec.write_block(SampleBlock(np.arange(k, e, dtype=np.uint32), s.t[k:e], s.values[k:e],
-                                    np.zeros((e - k, 3), np.int16), np.zeros(e - k, bool), now, 0.0))
-    rec.close()
-    print(f"{args.output}: {n} samples at {s.fs_hz:.6g} Hz imported from {args.file}")
+    if formats.format_of(args.output) is not formats.mcap:
+        raise ValueError(f"-o {args.output}: import writes an MCAP recording (.mcap)")
+    check_outputs([Output("-o", args.output), Output("-o", part_path(args.output), replaceable=False)],
+                  [args.file], args.force)
+    s = formats.read_samples(args.file, **_read_options(args))
+    formats.mcap.write_samples(args.output, s, force=args.force, inputs=[args.file],
+                               source=f"imported from {args.file}")
+    print(f"{args.output}: {len(s.t) - int(np.count_nonzero(s.filled))} samples at {s.fs_hz:.6g} Hz imported "
+          f"from {args.file}")
     return 0
 
 
 def recover_cmd(args) -> int:
-    from .recover import recover
-
-    rep = recover(args.broken, args.output)
-    state = "complete file" if rep.complete else f"truncated input ({rep.stopped_at or 'no footer'})"
+    rep = recover(args.file, args.output, force=args.force)
+    if rep.complete:
+        state = "the input was whole"
+    else:
+        state = f"{len(rep.damage)} damaged region(s) skipped" if rep.damage else "the input was cut short"
+        if rep.damage:
+            state += " (" + "; ".join(d.describe() for d in rep.damage[:3]) + ("; ..." if len(rep.damage) > 3 else "") + ")"
     topics = ", ".join(f"{k}: {v}" for k, v in sorted(rep.messages.items()))
-    print(f"{args.output}: {rep.total_messages} messages recovered from {rep.chunks} chunks; {state}; {topics}")
+    lost = (f"; /rig/accel frames lost with the damage: {sum(b - a + 1 for a, b in rep.lost_seq)}"
+            if rep.lost_seq else "")
+    print(f"{args.output}: {rep.total_messages} messages recovered from {rep.chunks} intact chunks; {state}; "
+          f"{topics}{lost}")
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] not in VERBS and not argv[0].startswith("-"):
-        argv.insert(0, "play")  # replay FILE ... means replay play FILE ...
+    if argv and argv[0] not in VERBS and argv[0] not in TOP_LEVEL:
+        argv.insert(0, "play")  # replay [OPTIONS] FILE [OPTIONS] means replay play ...
     args = build_parser().parse_args(argv)
     return run_guarded(f"replay {args.command}", args.func, args)
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from ident.live.pipeline import Pipeline, PipelineConfig, StepOutput, rolling_config
 
-from .sources import Samples
+from .formats.base import Samples
 
 
 @dataclass
@@ -31,8 +31,8 @@ def play(samples: Samples, *, rate: float | None = 1.0, start_s: float = 0.0, du
          loop: bool = False, identify: bool = True, on_step: Callable[[StepOutput], None] | None = None,
          stop: Callable[[], bool] | None = None, max_loops: int | None = None, window_s: float = 4.0,
          hop_s: float = 1.0) -> PlayReport:
-    if rate is not None and not rate > 0:
-        raise ValueError(f"--rate must be positive, got {rate}")
+    if rate is not None and not 0 < rate <= 1e6:
+        raise ValueError(f"--rate must be a positive, finite speed, got {rate}")
     pipe = Pipeline(PipelineConfig(fs_hz=samples.fs_hz, identify=identify,
                                    rolling=rolling_config(samples.fs_hz, window_s, hop_s)))
     rep = PlayReport()

@@ -1,96 +1,100 @@
 """Rebuild a readable, indexed MCAP file from a truncated or damaged one.
 
-A recording cut by kill -9 or power loss has no summary or footer, and its
-last chunk may be partial. We read records in order, keep every schema,
-channel, metadata, attachment and every message of every chunk whose CRC
-checks out, stop at the first record that is cut or corrupt, and write all
-of it again with a proper summary. Only the damaged tail is lost; with the
-recorder's one-second chunks that is at most the last second.
+The input is walked with the resynchronising reader (replay.formats.mcap.scan): every record that
+adds up is kept, every chunk whose CRC matches, every schema and channel wherever it was found
+(first chunk, the copies this tool's recorder writes after every chunk, the summary), every
+metadata record and attachment; the damaged regions between them are skipped. A cut (kill -9,
+power loss) costs the unfinished chunk, at most the last second; a damaged chunk costs that chunk;
+a damaged header costs nothing. The output is written beside its target and renamed when complete
+(daq.safeio), never over the input (compared by device and inode) and never over an existing file
+without ``force``.
+
+The output says what was lost: metadata ``recovery`` lists the damaged byte ranges of the input and,
+for ``/rig/accel``, the sequence numbers lost with them (``lost_seq``: ``a-b`` ranges), so ``replay
+info`` tells frames lost to file damage from frames the device dropped.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mcap.exceptions import McapError
-from mcap.records import Attachment, Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
+
+from daq.recorder import TOPICS
+from daq.safeio import Output, check_outputs, safe_output
+
+from .formats.mcap import Damage, scan
 
 
 @dataclass
 class RecoverReport:
     messages: dict[str, int] = field(default_factory=dict)  # per topic
-    chunks: int = 0
-    complete: bool = False  # the input had its footer: nothing was missing
-    stopped_at: str = ""  # why reading stopped early
-    last_log_time_ns: int | None = None
+    chunks: int = 0  # intact chunks kept
+    complete: bool = False  # the input had its footer and no damage: nothing was missing
+    damage: list[Damage] = field(default_factory=list)
+    lost_seq: list[tuple[int, int]] = field(default_factory=list)  # /rig/accel sequence ranges lost to damage
+    dropped_messages: int = 0  # messages on channels that no intact record names
 
     @property
     def total_messages(self) -> int:
         return sum(self.messages.values())
 
+    @property
+    def stopped_at(self) -> str:
+        return "; ".join(d.describe() for d in self.damage)
 
-def recover(src: str | Path, dst: str | Path) -> RecoverReport:
-    src, dst = Path(src), Path(dst)
-    if src.resolve() == dst.resolve():
-        raise ValueError("recover writes a new file: give an output path different from the input")
+
+def _accel_seq(data: bytes) -> int | None:
     try:
-        fin = open(src, "rb")
-    except FileNotFoundError:
-        raise ValueError(f"{src}: no such file") from None
-    report = RecoverReport()
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    with fin, open(dst, "wb") as fout:
+        return int(json.loads(data)["seq"])
+    except (ValueError, KeyError, TypeError):
+        return None
+
+
+def recover(src: str | Path, dst: str | Path, force: bool = False) -> RecoverReport:
+    src, dst = Path(src), Path(dst)
+    check_outputs([Output("-o", dst)], [src], force)
+    s = scan(src)
+    report = RecoverReport(complete=s.complete, damage=list(s.damage), chunks=len(s.chunks))
+    if not s.channels or not (s.chunks or s.loose):
+        raise ValueError(f"{src}: no intact chunk with messages and channels found; nothing to recover")
+    accel_ids = s.topic_ids(TOPICS["accel"])
+    damage_starts = sorted(d.offset for d in s.damage)
+    with safe_output(dst, inputs=[src], force=force, label="-o") as tmp, open(tmp, "wb") as fout:
         w = Writer(fout, compression=CompressionType.ZSTD)
         w.start(profile="", library="shaker-ident replay recover")
-        schema_map: dict[int, int] = {0: 0}
-        chan_map: dict[int, int] = {}
-
-        def take(rec) -> None:
-            if isinstance(rec, Schema):
-                schemas[rec.id] = rec
-                schema_map[rec.id] = w.register_schema(rec.name, rec.encoding, rec.data)
-            elif isinstance(rec, Channel):
-                channels[rec.id] = rec
-                chan_map[rec.id] = w.register_channel(rec.topic, rec.message_encoding,
-                                                      schema_map.get(rec.schema_id, 0), rec.metadata)
-            elif isinstance(rec, Message):
-                if rec.channel_id not in chan_map:
-                    return
-                w.add_message(chan_map[rec.channel_id], rec.log_time, rec.data, rec.publish_time, rec.sequence)
-                topic = channels[rec.channel_id].topic
-                report.messages[topic] = report.messages.get(topic, 0) + 1
-                report.last_log_time_ns = max(report.last_log_time_ns or 0, rec.log_time)
-            elif isinstance(rec, Metadata):
-                w.add_metadata(rec.name, rec.metadata)
-            elif isinstance(rec, Attachment):
-                w.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type, rec.data)
-
-        reader = StreamReader(fin, emit_chunks=True, validate_crcs=True)
-        try:
-            for rec in reader.records:
-                if isinstance(rec, Chunk):
-                    inner = breakup_chunk(rec, validate_crc=True)  # all or nothing per chunk
-                    report.chunks += 1
-                    for r in inner:
-                        take(r)
-                elif isinstance(rec, (DataEnd, Footer)):
-                    report.complete = isinstance(rec, Footer) or report.complete
-                    if isinstance(rec, DataEnd):
-                        report.complete = True
-                        break
-                else:
-                    take(rec)
-        except (McapError, ValueError, EOFError, OSError) as exc:
-            report.stopped_at = f"{type(exc).__name__}: {exc}"
-        except Exception as exc:  # noqa: BLE001 - a damaged file may fail in any parser branch
-            report.stopped_at = f"{type(exc).__name__}: {exc}"
-        if not schemas and not channels and not report.chunks:
-            fout.close()
-            dst.unlink(missing_ok=True)
-            raise ValueError(f"{src}: no MCAP data found (not an MCAP file, or cut before its first record)")
+        schema_map = {0: 0}
+        for sid, sc in sorted(s.schemas.items()):
+            schema_map[sid] = w.register_schema(sc.name, sc.encoding, sc.data)
+        chan_map = {}
+        for cid, ch in sorted(s.channels.items()):
+            if ch.schema_id in schema_map:
+                chan_map[cid] = w.register_channel(ch.topic, ch.message_encoding, schema_map[ch.schema_id],
+                                                   ch.metadata)
+        last, last_off = None, -1  # the last /rig/accel message kept, and its chunk's offset
+        for cid, seq, log, pub, data, off in s.messages():
+            if cid not in chan_map:
+                report.dropped_messages += 1
+                continue
+            if cid in accel_ids:
+                if last is not None and off != last_off and any(last_off < d < off for d in damage_starts):
+                    a, b = _accel_seq(last), _accel_seq(data)
+                    if a is not None and b is not None and b > a + 1:
+                        report.lost_seq.append((a + 1, b - 1))
+                last, last_off = data, off
+            w.add_message(chan_map[cid], log, data, pub, seq)
+            topic = s.channels[cid].topic
+            report.messages[topic] = report.messages.get(topic, 0) + 1
+        for name, m in s.metadata:
+            if name != "recovery":
+                w.add_metadata(name, m)
+        for a in s.attachments:
+            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+        w.add_metadata("recovery", {
+            "source": str(src), "intact_chunks": str(len(s.chunks)), "complete": str(s.complete).lower(),
+            "damage": ";".join(f"{d.offset}-{d.end}:{d.what}" for d in s.damage),
+            "lost_seq": ",".join(f"{a}-{b}" for a, b in report.lost_seq)})
         w.finish()
     return report

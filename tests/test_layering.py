@@ -1,4 +1,5 @@
-"""The packages' layering: ``ident`` (the science) imports neither ``daq`` nor ``replay``.
+"""The packages' layering: ``ident`` (the science) imports neither ``daq`` nor ``replay``; ``daq`` (outside its
+command line) does not import ``replay``; no function imports a project module (no cycle held apart that way).
 
 ``ident.cli`` is the science package's I/O edge and the one place in ``ident`` that may compose other
 packages' readers and simulated devices; everything else in ``ident`` must load without them. Checked
@@ -57,3 +58,55 @@ def test_no_science_file_names_daq_or_replay_anywhere():
         if bad:
             offenders.append(f"{f.relative_to(ROOT)} imports {sorted(bad)}")
     assert offenders == []
+
+
+PROJECT = ("ident", "daq", "replay")
+CLI_MODULES = {"daq/cli.py", "daq/bench.py", "daq/__main__.py"}  # daq's command line may compose replay's readers
+
+
+def _function_imports(path: Path) -> list[str]:
+    """Imports of a project module (absolute or relative) inside any function body of ``path``."""
+    found = []
+    name = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path.name
+    for fn in ast.walk(ast.parse(path.read_text(), str(path))):
+        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        for node in ast.walk(fn):
+            if isinstance(node, ast.ImportFrom) and (node.level > 0 or (node.module or "").split(".")[0] in PROJECT):
+                found.append(f"{name}:{node.lineno} from {'.' * node.level}{node.module or ''}")
+            elif isinstance(node, ast.Import):
+                found += [f"{name}:{node.lineno} import {a.name}" for a in node.names
+                          if a.name.split(".")[0] in PROJECT]
+    return found
+
+
+def test_no_function_imports_a_project_module():
+    """No import hidden inside a function to dodge a cycle: the layering is visible at the top of each file."""
+    files = [f for pkg in PROJECT for f in sorted((ROOT / pkg).rglob("*.py"))]
+    assert len(files) > 50
+    offenders = [hit for f in files for hit in _function_imports(f)]
+    assert offenders == []
+
+
+def test_the_check_sees_an_import_inside_a_function(tmp_path):
+    sample = tmp_path / "probe.py"
+    sample.write_text("import numpy\n\ndef f():\n    from .rig import Beam\n    import daq.protocol\n    import json\n")
+    assert [h.split(" ", 1)[1] for h in _function_imports(sample)] == ["from .rig", "import daq.protocol"]
+
+
+def test_daq_outside_its_command_line_never_imports_replay():
+    offenders = []
+    for f in sorted((ROOT / "daq").rglob("*.py")):
+        rel = f.relative_to(ROOT).as_posix()
+        if rel in CLI_MODULES:
+            continue
+        if "replay" in _imported_roots(f):
+            offenders.append(rel)
+    assert offenders == []
+
+
+def test_importing_daq_acquisition_loads_no_replay():
+    code = ("import sys, daq.driver, daq.recorder, daq.protocol, daq.safeio, daq.transport, daq.viewer\n"
+            "print(','.join(sorted(m for m in sys.modules if m.split('.')[0] == 'replay')))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert out.stdout.strip() == ""

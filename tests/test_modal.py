@@ -131,7 +131,7 @@ def test_a_hidden_cubic_interface_between_masses_2_and_3_is_named_with_its_stiff
 def test_mat_files_name_rows_like_the_csv_export(tmp_path):
     from scipy.io import savemat
 
-    from replay.sources import read_columns
+    from replay.formats import read_column_matrix as read_columns
 
     savemat(tmp_path / "a.mat", {"Force": np.arange(10.0)[None], "Acceleration": np.ones((3, 10)), "Fs": 400})
     data, fs = read_columns(tmp_path / "a.mat", ["Force", "Acceleration3"])

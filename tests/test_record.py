@@ -16,7 +16,7 @@ from daq.config import load_config
 from daq.driver import ClockEstimator
 from daq.protocol import Decoder
 from daq.transport import register_url_handler
-from replay.reader import read_recording
+from replay.formats.mcap import read_recording
 
 
 def cli(*args, timeout=120, **kw):
@@ -73,11 +73,12 @@ def test_raw_bytes_decode_to_the_recorded_samples(ten_seconds):
 
 def test_rig_url_handler_in_process():
     register_url_handler()
-    port = serial.serial_for_url("rig://?seed=4", timeout=0.1)
+    port = serial.serial_for_url("rig://?seed=4&device_id=0x1234", timeout=0.1)
     dec = Decoder()
-    fr = dec.feed(port.read(24 * 500))
-    assert len(fr) == 500 and dec.counters.crc_errors == 0
+    fr = dec.feed(port.read(36 + 24 * 500))  # the status frame at boot, then 500 samples
+    assert len(fr) == 500 and dec.counters.crc_errors == 0 and dec.counters.skipped_bytes == 0
     assert fr.seq.tolist() == list(range(500))
+    assert len(fr.status) == 1 and fr.status[0].device_id == 0x1234 and fr.status[0].rate_hz == 2000.0
     with pytest.raises(serial.SerialException, match="no option"):
         serial.serial_for_url("rig://?bogus=1")
 
@@ -121,10 +122,12 @@ def test_kill_9_then_recover_loses_at_most_one_second(tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=10)
     assert reported >= 8000
-    with pytest.raises(ValueError, match="replay recover"):
-        read_recording(out)
+    part = tmp_path / "killed.mcap.part"
+    assert not out.exists() and part.exists()  # never a half-written killed.mcap: the data is in the .part
+    with pytest.raises(ValueError, match="cut short.*replay recover"):
+        read_recording(part)
     fixed = tmp_path / "fixed.mcap"
-    r = cli("replay", "recover", str(out), "-o", str(fixed))
+    r = cli("replay", "recover", str(part), "-o", str(fixed))
     assert r.returncode == 0, r.stderr
     rec = read_recording(fixed)
     assert len(rec.seq) >= reported - 2000  # at most the last second (2000 samples) lost

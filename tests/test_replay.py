@@ -12,8 +12,9 @@ import pytest
 
 from daq.viewer import ENTITIES
 from replay.play import play
-from replay.reader import read_recording
-from replay.sources import read_csv, read_mcap
+from replay.formats.mcap import read_recording
+from replay.formats import read_samples as read_mcap
+from replay.formats.csv import read_samples as read_csv
 
 REC = Path(__file__).resolve().parents[1] / "recordings"
 
@@ -141,7 +142,8 @@ def test_csv_from_another_daq_with_other_column_names(tmp_path):
     ("base,tip1,tip2\n1,2,3\n1,nan,3\n1,2,3\n", ["--fs", "100"], "line 3 holds NaN"),
     ("base,tip1,tip2\n1,2,3\n1,x,3\n", ["--fs", "100"], "line 3 has a missing or non-numeric value"),
     ("t,base,tip1,tip2\n0,1,2,3\n0.1,1,2,3\n0.5,1,2,3\n", ["--time", "t"], "not uniformly sampled"),
-    ("base,tip1,tip2\n1,2,3\n1,2,3\n", [], "exactly one of --time COL or --fs HZ"),
+    ("base,tip1,tip2\n1,2,3\n1,2,3\n", [], "no time column (t, time, time_s, t_s); give --time COL or --fs HZ"),
+    ("t,base,tip1,tip2\n0,1,2,3\n0.1,1,2,3\n", ["--time", "t", "--fs", "10"], "exactly one of --time COL or --fs"),
 ])
 def test_bad_csv_is_one_line_exit_2(tmp_path, content, args, match):
     path = tmp_path / "bad.csv"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ident.paper.studies import run_study
-from replay.sources import read_mcap
+from replay.formats import read_samples as read_mcap
 
 REC = Path(__file__).resolve().parents[1] / "recordings"
 

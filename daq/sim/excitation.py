@@ -20,36 +20,40 @@ NOISE_COMPONENTS = 256
 
 @dataclass(frozen=True)
 class Step:
-    t_s: float = field(metadata={"min": 0.0})
-    amplitude_m_per_s2: float = field(metadata={"min": 0.0})
+    t_s: float = field(metadata={"min": 0.0, "max": 1e7})
+    amplitude_m_per_s2: float = field(metadata={"min": 0.0, "max": 1e4})
 
 
 @dataclass(frozen=True)
 class Kick:
-    t_s: float = field(metadata={"min": 0.0})
+    t_s: float = field(metadata={"min": 0.0, "max": 1e7})
     beam: int = field(default=1, metadata={"choices": (1, 2)})
-    velocity_m_per_s: float = 0.3
-    duration_s: float = field(default=0.005, metadata={"gt": 0.0})
+    velocity_m_per_s: float = field(default=0.3, metadata={"min": -100.0, "max": 100.0})
+    duration_s: float = field(default=0.005, metadata={"gt": 0.0, "max": 10.0})
 
 
 @dataclass(frozen=True)
 class Sweep:
-    start_hz: float = field(metadata={"gt": 0.0})
-    stop_hz: float = field(metadata={"gt": 0.0})
-    duration_s: float = field(metadata={"gt": 0.0})
+    start_hz: float = field(metadata={"gt": 0.0, "max": 1e4})
+    stop_hz: float = field(metadata={"gt": 0.0, "max": 1e4})
+    duration_s: float = field(metadata={"gt": 0.0, "max": 1e7})
 
 
 @dataclass(frozen=True)
 class Excitation:
-    frequency_hz: float = field(default=12.3, metadata={"gt": 0.0})
-    amplitude_m_per_s2: float = field(default=1.93, metadata={"min": 0.0})
-    ramp_s: float = field(default=2.0, metadata={"min": 0.0})
-    steps: tuple[Step, ...] = ()
-    kicks: tuple[Kick, ...] = ()
+    frequency_hz: float = field(default=12.3, metadata={"gt": 0.0, "max": 1e4})
+    amplitude_m_per_s2: float = field(default=1.93, metadata={"min": 0.0, "max": 1e4})
+    ramp_s: float = field(default=2.0, metadata={"min": 0.0, "max": 1e6})
+    steps: tuple[Step, ...] = field(default=(), metadata={"max_len": 1000})
+    kicks: tuple[Kick, ...] = field(default=(), metadata={"max_len": 1000})
     sweep: Sweep | None = None
-    noise_rms_m_per_s2: float = field(default=0.0, metadata={"min": 0.0})
-    noise_band_hz: tuple[float, ...] = (2.0, 40.0)
-    seed: int = 0
+    noise_rms_m_per_s2: float = field(default=0.0, metadata={"min": 0.0, "max": 1e4})
+    noise_band_hz: tuple[float, ...] = field(default=(2.0, 40.0), metadata={"len": 2, "gt": 0.0, "max": 1e4})
+    seed: int = field(default=0, metadata={"min": 0, "max": 2**63 - 1})
+
+    def __post_init__(self) -> None:
+        if self.noise_band_hz[0] >= self.noise_band_hz[1]:
+            raise ValueError(f"excitation.noise_band_hz must be [low, high] with low < high, got {list(self.noise_band_hz)}")
 
 
 def amplitude(exc: Excitation, t: np.ndarray) -> np.ndarray:

@@ -7,7 +7,7 @@ turns counts back into m/s^2 with the calibration (scale per count and offset).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -16,11 +16,12 @@ CHANNELS = ("base", "tip1", "tip2")
 
 @dataclass(frozen=True)
 class Sensor:
-    gain: float = 1.0  # true sensitivity over nominal: 1.02 = reads 2 % high
-    offset_m_per_s2: float = 0.0
-    noise_rms_m_per_s2: float = 0.02
-    range_m_per_s2: float = 160.0  # +-16 g accelerometer
-    adc_bits: int = 16
+    gain: float = field(default=1.0, metadata={"gt": 0.0, "max": 100.0})  # true over nominal: 1.02 = reads 2 % high
+    offset_m_per_s2: float = field(default=0.0, metadata={"min": -1e4, "max": 1e4})
+    noise_rms_m_per_s2: float = field(default=0.02, metadata={"min": 0.0, "max": 1e4})
+    range_m_per_s2: float = field(default=160.0, metadata={"gt": 0.0, "max": 1e6})  # +-16 g accelerometer
+    # the data frame carries int16 counts: more than 16 bits would clip every count beyond +-32767
+    adc_bits: int = field(default=16, metadata={"min": 8, "max": 16})
 
     @property
     def lsb_m_per_s2(self) -> float:

@@ -1,4 +1,4 @@
-"""pyserial handler for ``rig://[?config=PATH][&seed=N][&realtime=1]``: the simulated rig in process.
+"""pyserial handler for ``rig://[?config=PATH][&seed=N][&realtime=1][&device_id=N]``: the simulated rig in process.
 
 Reads return the device's frames. With ``realtime=1`` they are paced by the
 clock like the real line; by default a read returns as many frames as asked
@@ -13,7 +13,7 @@ import urllib.parse
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from ..config import load_config
-from ..sim.device import SimulatedDevice
+from ..sim.device import DEFAULT_DEVICE_ID, SimulatedDevice
 from ..protocol import FRAME_LEN
 
 FAST_READ_FRAMES = 100  # frames a read finds waiting when not paced in real time
@@ -39,18 +39,27 @@ class Serial(SerialBase):
     def _from_url(self, url: str) -> SimulatedDevice:
         parts = urllib.parse.urlsplit(url)
         if parts.scheme != "rig":
-            raise SerialException(f"expected rig://[?config=PATH&seed=N&realtime=1], got {url!r}")
+            raise SerialException(f"expected rig://[?config=PATH&seed=N&realtime=1&device_id=N], got {url!r}")
         opts = {k: v[-1] for k, v in urllib.parse.parse_qs(parts.query).items()}
-        unknown = set(opts) - {"config", "seed", "realtime"}
+        unknown = set(opts) - {"config", "seed", "realtime", "device_id"}
         if unknown:
-            raise SerialException(f"rig:// has no option {sorted(unknown)[0]!r}; options: config, seed, realtime")
+            raise SerialException(f"rig:// has no option {sorted(unknown)[0]!r}; options: config, seed, realtime, "
+                                  f"device_id")
+        ints = {}
+        for key in ("seed", "device_id"):
+            if key in opts:
+                try:
+                    ints[key] = int(opts[key], 0)
+                except ValueError:
+                    raise SerialException(f"rig:// option {key} must be an integer, got {opts[key]!r}") from None
+                if not 0 <= ints[key] < 2**32:
+                    raise SerialException(f"rig:// option {key} must be from 0 to 2^32-1, got {opts[key]}")
         try:
             cfg = load_config(opts.get("config"))
         except ValueError as exc:
             raise SerialException(str(exc)) from None
         self._realtime = opts.get("realtime", "0") not in ("0", "false", "")
-        seed = int(opts["seed"]) if "seed" in opts else None
-        return SimulatedDevice(cfg, seed)
+        return SimulatedDevice(cfg, ints.get("seed"), ints.get("device_id", DEFAULT_DEVICE_ID))
 
     def close(self):
         self.is_open = False
@@ -74,7 +83,7 @@ class Serial(SerialBase):
         dev = self._device
         while len(self._pending) < size:
             if self._realtime:
-                due = int((time.monotonic() - self._t0) * dev.rate_hz) - dev.seq
+                due = int((time.monotonic() - self._t0) * dev.rate_hz) - dev.sample_index
                 if due <= 0:
                     if self._timeout is not None and len(self._pending) > 0:
                         break

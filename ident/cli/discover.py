@@ -15,6 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.formats import read_column_matrix as read_columns
+from replay.formats import read_samples as open_samples
+
+from ..config import build
+from ..discovery import _beam_rhs, coordinates, discover, indices, simulated_tips, warm_up_s
+from ..linear_discovery import KINDS_EXCITATION, KINDS_RESPONSE, discover_linear
+from ..modal_discovery import F_LO_HZ, discover_modal
+from ..physical import integrate_band
+from ..rig import RigParams
+
 
 def add_parser(sub) -> None:
     p = sub.add_parser("discover", help="find what the rig model misses in measured data, name it, extend it")
@@ -59,8 +69,6 @@ def parse_slice(text: str | None, n: int, name: str) -> slice | None:
 
 
 def _load(args):
-    from replay.sources import open_samples
-
     path = Path(args.data)
     if path.suffix.lower() == ".csv":
         resp = args.response or ["tip1", "tip2"]
@@ -79,9 +87,6 @@ def _model(path: Path):
     """The rig model (``ident.rig.RigParams``) from a YAML file: its ``rig`` section; the rest of a
     daq config (shaker programme, sensors, daq) is the simulated device's and is ignored here."""
     import yaml
-
-    from ..config import build
-    from ..rig import RigParams
 
     try:
         data = yaml.safe_load(path.read_text())
@@ -142,11 +147,7 @@ def _split_kind(spec: str, default: str) -> tuple[str, str]:
 def _columns(path: Path, cols: list[str], args) -> tuple[np.ndarray, float]:
     """Named columns of a CSV or MAT file, or channels (base, tip1, tip2) of a recording."""
     if path.suffix.lower() in (".csv", ".txt", ".mat"):
-        from replay.sources import read_columns
-
         return read_columns(path, cols, args.time_col, args.fs_hz)
-    from replay.sources import open_samples
-
     s = open_samples(path)
     roles = {"base": 0, "tip1": 1, "tip2": 2}
     for c in cols:
@@ -161,8 +162,6 @@ def _params_text(parameters: dict) -> str:
 
 def run_linear(args) -> int:
     """--baseline linear: any CSV, MAT file or recording with an excitation and responses of given kinds."""
-    from ..linear_discovery import KINDS_EXCITATION, KINDS_RESPONSE, discover_linear
-
     exc_col, exc_kind = _split_kind(args.excitation, "base_acceleration")
     if exc_kind not in KINDS_EXCITATION:
         raise ValueError(f"excitation kind {exc_kind!r} is not one of {', '.join(KINDS_EXCITATION)}")
@@ -219,8 +218,6 @@ def _nothing(residual_rms: dict, unit: str) -> str:
 
 def _run_modal(args, data, fs, names, specs, cols, train, test) -> int:
     """A force-excited structure: modal baseline, internal forces at or between the responses."""
-    from ..modal_discovery import discover_modal
-
     if any(k != "acceleration" for _, k in specs):
         raise ValueError("with a force excitation the linear baseline is a modal model of accelerations: "
                          "give acceleration responses (the first at the driving point)")
@@ -344,9 +341,6 @@ def _plot_portraits(path: Path, rows: list[tuple[str, np.ndarray, np.ndarray, np
 
 
 def _report_modal(folder: Path, d, js: dict, data, fs: float, names: list[str], fit_where: str, holds: str) -> None:
-    from ..modal_discovery import F_LO_HZ
-    from ..physical import integrate_band
-
     folder.mkdir(parents=True, exist_ok=True)
     Y = data[:, 1:]
     te, tr = d.test, d.train
@@ -394,8 +388,6 @@ def _report_modal(folder: Path, d, js: dict, data, fs: float, names: list[str], 
 def run(args) -> int:
     if args.baseline == "linear":
         return run_linear(args)
-    from ..discovery import discover
-
     s = _load(args)
     nominal = _model(args.model)
     n = len(s.t)
@@ -418,8 +410,6 @@ def run(args) -> int:
 
 
 def _report(folder: Path, d, js: dict, s) -> None:
-    from ..discovery import _beam_rhs, coordinates, indices, simulated_tips, warm_up_s
-
     folder.mkdir(parents=True, exist_ok=True)
     fs = s.fs_hz
     base, tips, z, v, r, base_full = coordinates(s.values, fs)

@@ -13,7 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from daq.safeio import Output, check_outputs, safe_folder, safe_output
+
 from ..paper.duffing import DEFAULT_ETAS, QUICK_ETAS, run_study
+from . import SEED
 
 TERMS_D = ["1", "x1", "x2", "x1^2", "x1 x2", "x2^2", "x1^3", "x1^2 x2", "x1 x2^2", "x2^3", "F"]
 
@@ -23,27 +26,28 @@ def add_parser(sub) -> None:
     p.add_argument("--json", type=Path, help="write the results as JSON here")
     p.add_argument("--report", type=Path, help="write a report folder (markdown, CSV, PNG) here")
     p.add_argument("--quick", action="store_true", help="4 noise levels x 3 repetitions instead of 10 x 10")
-    p.add_argument("--seed", type=int, default=0, help="seed of the noise draws (default 0)")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the noise draws (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--force", action="store_true", help="replace an existing --json, write into a non-empty --report")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from tqdm import tqdm
 
-    if args.report is not None and args.report.is_file():
-        raise ValueError(f"--report {args.report} is a file; give a folder")
+    check_outputs([Output("--json", args.json), Output("--report", args.report, folder=True)], (), args.force)
     n = 2 * (len(QUICK_ETAS) * 3 if args.quick else len(DEFAULT_ETAS) * 10)
     with tqdm(total=n, desc="noise sweep", disable=args.no_progress, unit="fit") as bar:
         study = run_study(quick=args.quick, seed=args.seed, progress=bar.update)
     js = study["json"]
     print(summary_text(js))
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(js, indent=2, default=_jsonable))
+        with safe_output(args.json, force=args.force, label="--json") as tmp:
+            tmp.write_text(json.dumps(js, indent=2, default=_jsonable))
         print(f"wrote {args.json}")
     if args.report:
-        write_report(args.report, study)
+        with safe_folder(args.report, force=args.force) as folder:
+            write_report(folder, study)
         print(f"wrote {args.report / 'README.md'}")
     return 0
 

@@ -3,18 +3,23 @@
 Reads the recording with replay's readers (a command line may compose any
 package's readers), runs ident.paper.studies on a steady segment, prints the
 equations and writes the coefficient tables and figures like the paper's
-Tables 4-7 and Figs. 9-12.
+Tables 4-7 and Figs. 9-12. Outputs are checked before the recording is read and
+written atomically (daq.safeio): never over the input, never over a file without ``--force``.
 """
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
 import numpy as np
-from replay.sources import open_samples
+
+from daq.safeio import Output, check_outputs, safe_folder, safe_output
+from replay.formats import read_samples
 
 from ..paper.studies import run_study
+from . import DURATION, OFFSET, RATE_HZ, number
 
 
 def add_parser(sub) -> None:
@@ -22,24 +27,27 @@ def add_parser(sub) -> None:
     p.add_argument("file")
     p.add_argument("--study", type=int, choices=(1, 2, 3), default=1,
                    help="1: no impact, one blade, 2-D; 2: localized, both blades, 4 states; 3: both impacting")
-    p.add_argument("--start", type=float, default=5.0, help="seconds to skip (default 5: past ramps and kicks)")
-    p.add_argument("--duration", type=float, help="seconds to use (default: to the end)")
-    p.add_argument("--degree", type=int, action="append", help="library degree p (repeat for several)")
-    p.add_argument("--dimension", type=int, help="embedding dimension per signal (default: the study's)")
-    p.add_argument("--delay", type=int, help="delay in samples at 200 Hz (default: first ACF zero)")
+    p.add_argument("--start", type=OFFSET, default=5.0, help="seconds to skip (default 5: past ramps and kicks)")
+    p.add_argument("--duration", type=DURATION, help="seconds to use (default: to the end)")
+    p.add_argument("--degree", type=number(1, 5, integer=True), action="append",
+                   help="library degree p, 1 to 5 (repeat for several)")
+    p.add_argument("--dimension", type=number(1, 10, integer=True), help="embedding dimension per signal (default: "
+                                                                         "the study's)")
+    p.add_argument("--delay", type=number(1, 10_000, integer=True), help="delay in samples at 200 Hz (default: "
+                                                                         "first ACF zero)")
     p.add_argument("--derivative", choices=("tvregdiff", "savgol", "spectral", "gradient"))
-    p.add_argument("--fs", type=float, dest="fs_hz", help="CSV input: sampling rate")
+    p.add_argument("--fs", type=RATE_HZ, dest="fs_hz", help="CSV input: sampling rate")
     p.add_argument("--time", dest="time_col", help="CSV input: time column")
     p.add_argument("--json", type=Path, help="write results as JSON")
     p.add_argument("--report", type=Path, help="write a report folder (markdown, CSV, PNG)")
+    p.add_argument("--force", action="store_true", help="replace an existing --json, write into a non-empty --report")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    kw = {}
-    if Path(args.file).suffix.lower() == ".csv":
-        kw = {"time_col": args.time_col, "fs_hz": args.fs_hz}
-    s = open_samples(args.file, **kw)
+    inputs = [args.file]
+    check_outputs([Output("--json", args.json), Output("--report", args.report, folder=True)], inputs, args.force)
+    s = read_samples(args.file, time_col=args.time_col, fs_hz=args.fs_hz)
     if args.start < 0 or args.start >= s.duration_s:
         raise ValueError(f"--start {args.start} s is outside the data (0 to {s.duration_s:.2f} s)")
     i0 = int(args.start * s.fs_hz)
@@ -55,10 +63,11 @@ def run(args) -> int:
         for e in f["equations"]:
             print(f"    {e}")
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(js, indent=2))
+        with safe_output(args.json, inputs=inputs, force=args.force, label="--json") as tmp:
+            tmp.write_text(json.dumps(js, indent=2))
     if args.report:
-        write_report(args.report, res, js)
+        with safe_folder(args.report, inputs=inputs, force=args.force) as folder:
+            write_report(folder, res, js)
         print(f"wrote {args.report / 'README.md'}")
     return 0
 
@@ -77,8 +86,6 @@ def to_json(res, source: str, start: float) -> dict:
 
 
 def write_report(folder: Path, res, js: dict) -> None:
-    import csv
-
     import matplotlib
 
     matplotlib.use("Agg")

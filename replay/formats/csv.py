@@ -1,0 +1,125 @@
+"""CSV files with a header row: other DAQs' exports, and ``replay export``'s own (``t,seq,base,tip1,tip2``).
+
+Times come from a time column (``--time COL``; found by itself when a column is named ``t``, ``time``,
+``time_s`` or ``t_s`` and neither ``--time`` nor ``--fs`` is given) or from a rate (``--fs HZ``). A time
+column must be uniform within 1 %, except for holes of whole steps (frames a recording lost), which are
+filled like a recording's. Every error names the file and the line or column.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from daq.safeio import safe_output
+
+from .base import Columns, Samples, check_rate, on_grid
+
+SUFFIXES = (".csv", ".txt")
+TIME_NAMES = ("t", "time", "time_s", "t_s")
+MAX_BYTES = 4 << 30
+
+
+def _rows(path: Path) -> list[list[str]]:
+    try:
+        if path.stat().st_size > MAX_BYTES:
+            raise ValueError(f"{path}: larger than {MAX_BYTES >> 30} GiB")
+        with open(path, newline="") as fh:
+            return list(csv.reader(fh))
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise ValueError(f"{path}: is a folder; give a CSV file") from None
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise ValueError(f"{path}: not a text CSV file ({str(exc)[:60]})") from None
+
+
+def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | None):
+    """(header, data (n, k) for [time_col] + columns, time_col used)."""
+    rows = _rows(path)
+    if not rows:
+        raise ValueError(f"{path}: empty file; expected a header row and data")
+    header = [h.strip() for h in rows[0]]
+    if time_col is None and fs_hz is None:
+        time_col = next((c for c in TIME_NAMES if c in header), None)
+        if time_col is None:
+            raise ValueError(f"{path}: no time column ({', '.join(TIME_NAMES)}); give --time COL or --fs HZ")
+    elif time_col is not None and fs_hz is not None:
+        raise ValueError("CSV input needs exactly one of --time COL or --fs HZ")
+    wanted = ([time_col] if time_col else []) + list(columns)
+    missing = [c for c in wanted if c not in header]
+    if missing:
+        raise ValueError(f"{path}: no column {missing[0]!r}; columns are: {', '.join(header)}")
+    idx = [header.index(c) for c in wanted]
+    data = np.empty((len(rows) - 1, len(idx)))
+    for r, row in enumerate(rows[1:], start=2):
+        try:
+            data[r - 2] = [float(row[i]) for i in idx]
+        except (ValueError, IndexError):
+            raise ValueError(f"{path}: line {r} has a missing or non-numeric value in columns "
+                             f"{', '.join(wanted)}") from None
+    if len(data) < 2:
+        raise ValueError(f"{path}: needs at least two data rows")
+    bad = ~np.isfinite(data).all(axis=1)
+    if bad.any():
+        raise ValueError(f"{path}: line {int(np.argmax(bad)) + 2} holds NaN or inf; repair or remove it")
+    return data, time_col
+
+
+def _grid(path: Path, t: np.ndarray, time_col: str) -> tuple[np.ndarray, float]:
+    """Grid positions of the rows and the rate, from a time column: uniform, or with holes of whole steps."""
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        raise ValueError(f"{path}: column {time_col!r} is not strictly increasing (line {int(np.argmax(dt <= 0)) + 3})")
+    med = float(np.median(dt))
+    k = dt / med
+    if np.max(np.abs(k - np.rint(k))) > 0.01:
+        raise ValueError(f"{path}: column {time_col!r} is not uniformly sampled (steps from "
+                         f"{dt.min():.3g} to {dt.max():.3g} s); resample first or give --fs")
+    return np.concatenate([[0], np.cumsum(np.rint(k).astype(np.int64))]), check_rate(1.0 / med, "the time column's rate")
+
+
+def read_columns(path: str | Path, names: list[str], time_col: str | None = None,
+                 fs_hz: float | None = None) -> Columns:
+    """The named columns as floats and the sampling rate (a time column must be uniform here: no holes)."""
+    path = Path(path)
+    if fs_hz is not None:
+        check_rate(fs_hz)
+    data, time_col = _table(path, list(names), time_col, fs_hz)
+    if time_col is None:
+        return Columns({c: data[:, j] for j, c in enumerate(names)}, float(fs_hz), str(path))
+    index, fs = _grid(path, data[:, 0], time_col)
+    if index[-1] != len(index) - 1:
+        dt = np.diff(data[:, 0])
+        raise ValueError(f"{path}: column {time_col!r} is not uniformly sampled (steps from "
+                         f"{dt.min():.3g} to {dt.max():.3g} s); resample first or give --fs")
+    return Columns({c: data[:, j + 1] for j, c in enumerate(names)}, fs, str(path))
+
+
+def read_samples(path: str | Path, *, time_col: str | None = None, fs_hz: float | None = None,
+                 base: str = "base", tip1: str = "tip1", tip2: str = "tip2", fill: bool = True) -> Samples:
+    """Base, tip1, tip2 from the named columns; a time column's holes filled (``fill``)."""
+    path = Path(path)
+    if fs_hz is not None:
+        check_rate(fs_hz)
+    data, time_col = _table(path, [base, tip1, tip2], time_col, fs_hz)
+    if time_col is None:
+        return Samples(np.arange(len(data)) / fs_hz, data, float(fs_hz), np.arange(len(data)), str(path))
+    index, fs = _grid(path, data[:, 0], time_col)
+    return on_grid(index, data[:, 1:], index, fs, str(path), fill)
+
+
+def write_samples(path: str | Path, samples: Samples, *, force: bool = False, inputs: Iterable = (),
+                  label: str = "--csv") -> Path:
+    """``t,seq,base,tip1,tip2``: t in s from the first sample, accelerations in m/s^2; rows as recorded
+    (give samples read with ``fill=False``: lost frames are absent, not interpolated)."""
+    keep = ~samples.filled
+    seq = samples.seq if samples.seq is not None else np.arange(len(samples.t))
+    data = np.column_stack([samples.t[keep], seq[keep], samples.values[keep]])
+    with safe_output(path, inputs=inputs, force=force, label=label) as tmp:
+        np.savetxt(tmp, data, delimiter=",", header="t,seq,base,tip1,tip2", comments="",
+                   fmt=["%.6f", "%d", "%.9g", "%.9g", "%.9g"])
+    return Path(path)

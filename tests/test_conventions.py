@@ -1,0 +1,109 @@
+"""Command-line conventions: --version everywhere, options before or after the file, export/import round trip
+as is, what replay info says about the clock and about an empty recording."""
+
+import re
+import subprocess
+import sys
+from importlib.metadata import version
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clitools import run_main
+from daq.cli import main as daq_main
+from daq.config import load_config
+from daq.recorder import McapRecorder
+from ident.cli.main import main as ident_main
+from replay.cli import main as replay_main
+from replay.formats import read_samples
+from replay.formats.mcap import read_recording
+
+REC = Path(__file__).resolve().parents[1] / "recordings"
+VERSION = version("shaker-ident")
+
+
+@pytest.mark.parametrize("main,argv", [
+    (ident_main, []), (ident_main, ["duffing"]), (ident_main, ["fit"]), (ident_main, ["discover"]),
+    (ident_main, ["bench"]), (daq_main, []), (daq_main, ["record"]), (daq_main, ["sim"]), (daq_main, ["bench"]),
+    (replay_main, []), (replay_main, ["play"]), (replay_main, ["info"]), (replay_main, ["export"]),
+    (replay_main, ["import"]), (replay_main, ["recover"]),
+])
+def test_every_command_has_version(main, argv):
+    code, out, err, tb = run_main(main, [*argv, "--version"])
+    assert code == 0 and tb is None and out.strip().endswith(f"(shaker-ident) {VERSION}"), (out, err)
+
+
+def test_console_script_version():
+    p = subprocess.run([sys.executable, "-m", "replay", "--version"], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0 and p.stdout.strip() == f"replay (shaker-ident) {VERSION}"
+
+
+@pytest.mark.parametrize("argv", [["--max", "{f}", "--no-identify", "--duration", "1"],
+                                  ["{f}", "--max", "--no-identify", "--duration", "1"],
+                                  ["--max", "--duration", "1", "{f}", "--no-identify"],
+                                  ["play", "--no-identify", "{f}", "--max", "--duration", "1"]])
+def test_options_before_or_after_the_file(argv):
+    f = str(REC / "linear.mcap")
+    code, out, err, tb = run_main(replay_main, [a.format(f=f) for a in argv])
+    assert code == 0 and tb is None, err
+    assert out.startswith("played 1.00 s of data")
+
+
+def test_import_reads_export_as_it_is_holes_included(tmp_path):
+    """export writes the rows recorded (lost frames absent); import finds the time column and fills the
+    holes like a recording's: the samples come back the same."""
+    cfg = tmp_path / "drops.yaml"
+    cfg.write_text("daq:\n  faults:\n    drop_frame_rate: 0.01\n")
+    rec = tmp_path / "drops.mcap"
+    code, _, err, _ = run_main(daq_main, ["record", "--port", f"rig://?config={cfg}", "--config", cfg, "--duration",
+                                          "3", "-o", rec, "--quiet", "--no-identify"])
+    assert code == 0, err
+    csv, back = tmp_path / "x.csv", tmp_path / "back.mcap"
+    assert run_main(replay_main, ["export", rec, "--csv", csv])[0] == 0
+    assert csv.read_text().splitlines()[0] == "t,seq,base,tip1,tip2"
+    code, out, err, _ = run_main(replay_main, ["import", csv, "-o", back])  # no --time: column t is found
+    assert code == 0, err
+    a, b = read_samples(rec), read_samples(back)
+    assert len(a.t) == len(b.t) and np.count_nonzero(a.filled) == np.count_nonzero(b.filled) > 30
+    np.testing.assert_allclose(b.values, a.values, rtol=1e-5, atol=1e-5)  # the recording's JSON keeps 6 digits
+    assert b.fs_hz == pytest.approx(2000.0, rel=1e-6)
+    mat = tmp_path / "x.mat"
+    assert run_main(replay_main, ["export", rec, "-o", mat])[0] == 0
+    m = read_samples(mat, fill=False)
+    np.testing.assert_allclose(m.values, read_samples(rec, fill=False).values, rtol=1e-12)
+
+
+def test_info_clock_drift_is_sane_or_says_why_not():
+    """The examples were recorded from rig:// without realtime=1 (10 s of device time in 0.4-0.7 s of host
+    time): the least-squares slope is right, but it measures the replay speed, not a crystal. The -957,585
+    ppm the issue saw is that slope - 1; info now names it instead of printing it as drift."""
+    code, out, err, _ = run_main(replay_main, ["info", REC / "localized-1.mcap"])
+    assert code == 0, err
+    line = next(x for x in out.splitlines() if x.startswith("clock"))
+    assert "not a real-time source" in line and "ppm" not in line
+    ratio = float(re.search(r"ran ([\d.]+) x", line).group(1))
+    st = read_recording(REC / "localized-1.mcap", raw=False).status[-1]
+    assert ratio == pytest.approx(1 / (1 + st["clock_drift_ppm"] * 1e-6), rel=0.01)  # 23.6 x for -957,585 ppm
+
+
+def test_info_on_a_real_time_recording_prints_drift_in_ppm(tmp_path):
+    cfg = tmp_path / "drift.yaml"
+    cfg.write_text("daq:\n  faults:\n    clock_drift_ppm: 3000\n")
+    out = tmp_path / "drift.mcap"
+    code, _, err, _ = run_main(daq_main, ["record", "--sim", "--config", cfg, "--duration", "3", "-o", out, "--quiet",
+                                          "--no-identify"])
+    assert code == 0, err
+    code, info, err, _ = run_main(replay_main, ["info", out])
+    ppm = float(re.search(r"clock      drift ([+-][\d.]+) ppm", info).group(1))
+    # the device clock runs 3000 ppm fast: host seconds per device second are 1/1.003, i.e. -2991 ppm
+    assert ppm == pytest.approx((1 / 1.003 - 1) * 1e6, abs=400)
+
+
+def test_info_on_an_empty_recording(tmp_path):
+    path = tmp_path / "empty.mcap"
+    McapRecorder(path, load_config(None)).close()
+    code, out, err, tb = run_main(replay_main, ["info", path])
+    assert code == 0 and tb is None, err
+    assert "samples    0" in out and "nan" not in out.lower()
+    assert "duration   - (fewer than two samples)" in out and "rate       - (fewer than two samples)" in out
