@@ -15,16 +15,14 @@ noisy machine. Run it alone: the compiled kernel uses both cores.
 from __future__ import annotations
 
 import time
-from collections import Counter
 
 import numpy as np
-from daq.sim.hidden import HIDDEN, hidden_case
 
 from ..derivatives import smooth
-from ..discovery import discover
 from ..library import PolynomialForcingLibrary
 from ..paper.duffing import denoise_window, duffing_data
 from ..sindy import sweep
+from .bench_discovery import run_discovery
 
 
 TOLERANCE = 0.5  # the same selection rule as ident.sindy.sweep's default
@@ -34,7 +32,12 @@ def add_parser(sub) -> None:
     p = sub.add_parser("bench", help="benchmarks (printed ratios, not tests)")
     p.add_argument("what", choices=["sweep", "discovery"],
                    help="sweep: ours vs a pysindy fit+simulate loop; discovery: hidden-effect cases")
-    p.add_argument("--cases", type=int, default=40, help="discovery: number of seeded cases (default 40)")
+    p.add_argument("--cases", type=int, default=100, help="discovery: number of seeded cases (default 100)")
+    p.add_argument("--generator", choices=("independent", "rig"), default="independent",
+                   help="discovery: daq.sim.independent (written apart from ident; default) or daq.sim.hidden "
+                        "(this project's rig model with one effect)")
+    p.add_argument("--seed", type=int, default=0, help="discovery: first seed")
+    p.add_argument("--workers", type=int, default=1, help="discovery: processes (the machine's cores at most)")
     p.add_argument("--max-baseline", type=int, default=0,
                    help="run pysindy on at most this many thresholds and extrapolate (0 = all)")
     p.set_defaults(func=run)
@@ -72,44 +75,10 @@ def _pysindy_loop(x, xdot, t, f, lambdas, n_rows):
 
 def run(args) -> int:
     if args.what == "discovery":
-        return run_discovery(args.cases)
+        if args.cases < 1 or args.workers < 1:
+            raise ValueError("--cases and --workers must be at least 1")
+        return run_discovery(args.generator, args.cases, args.seed, args.workers)
     return run_sweep(args)
-
-
-def run_discovery(n_cases: int) -> int:
-    """Seeded hidden-effect cases: confusion table of true against named effect, parameter errors, gains."""
-    conf: Counter = Counter()
-    perr: dict[str, list[float]] = {}
-    gains: dict[str, list[float]] = {}
-    right = 0
-    t0 = time.perf_counter()
-    for seed in range(n_cases):
-        c = hidden_case(seed)
-        d = discover(c.values, c.fs_hz, c.nominal)
-        top = d.findings[0] if d.findings else None
-        named = top.effect if top else "none"
-        ok = named == c.effect and (c.effect == "none" or top.response == f"tip{c.beam}")
-        right += ok
-        conf[(c.effect, named)] += 1
-        if ok and top is not None:
-            key = "gap" if c.effect == "contact" else next(iter(c.truth))
-            if key not in top.parameters:
-                key = next(iter(top.parameters))
-            perr.setdefault(c.effect, []).append(abs(top.parameters[key] / c.truth[key] - 1))
-            gains.setdefault(c.effect, []).append(top.gain)
-        print(f"case {seed:3d}: {c.effect:18s} beam {c.beam} ({c.excitation:5s}) -> {named:18s}"
-              f"{'' if ok else '  WRONG'}", flush=True)
-    names = list(HIDDEN) + sorted({n for _, n in conf} - set(HIDDEN))
-    print(f"\nconfusion (rows true, columns named), {n_cases} cases in {time.perf_counter() - t0:.0f} s:")
-    print(" " * 19 + "".join(f"{n[:10]:>11s}" for n in names))
-    for tr in HIDDEN:
-        print(f"{tr:19s}" + "".join(f"{conf[(tr, n)]:11d}" for n in names))
-    print(f"named right (effect and response): {right}/{n_cases} = {100 * right / n_cases:.1f} %")
-    for e in perr:
-        key = "gap" if e == "contact" else "parameter"
-        print(f"{e:18s} {key} error: median {100 * np.median(perr[e]):.1f} %, max {100 * np.max(perr[e]):.1f} %; "
-              f"gain: median {np.median(gains[e]):.2f}, min {np.min(gains[e]):.2f}")
-    return 0
 
 
 def run_sweep(args) -> int:

@@ -1,455 +1,258 @@
-"""``ident discover DATA --model RIG.yaml``: what the rig simulation gets wrong, its cause, the gain.
+"""``ident discover DATA``: what a model gets wrong in measured data, its cause, the extended model's gain.
 
-DATA is a recording of this tool (.mcap) or a CSV with a header row (columns
-``--excitation`` base acceleration and ``--response`` tip accelerations;
-``--time COL`` or ``--fs HZ``). START:STOP are sample indices, Python-slice
-style. The JSON holds the baseline's and the extended model's test NRMSE, the
-gain and the findings sorted by gain (empty when nothing was found).
+DATA is a recording of this tool (.mcap: base, tip1, tip2), a CSV with a header row (``--time COL`` or
+``--fs HZ``) or a MAT file (a ``1 x N`` variable is a column by its name, row i of a ``k x N`` one is NAMEi,
+the rate from ``Fs``). The baseline is the rig model of ``--model RIG.yaml``, or a modal model fitted to the
+data (or to ``--fit-data``, e.g. a low-level test). Columns: ``--excitation COL:KIND`` (force,
+base_acceleration or voltage) and ``--response COL:KIND`` (displacement, velocity or acceleration),
+repeated; defaults are the rig's base, tip1 and tip2 accelerations. START:STOP are sample indices.
 """
 
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
+import matplotlib
 import numpy as np
+from scipy.signal import welch
+from daq.config import read_yaml_file
+from daq.safeio import Output, check_outputs, safe_folder, safe_output
+from replay.formats import read_column_matrix, read_samples
 
-from replay.formats import read_column_matrix as read_columns
-from replay.formats import read_samples as open_samples
-
+from . import parse_split
 from ..config import build
-from ..discovery import _beam_rhs, coordinates, discover, indices, simulated_tips, warm_up_s
-from ..linear_discovery import KINDS_EXCITATION, KINDS_RESPONSE, discover_linear
-from ..modal_discovery import F_LO_HZ, discover_modal
-from ..physical import integrate_band
+from ..discovery import Channel, Discovery, Measurement, discover, to_json
+from ..discovery.search import predict
+from ..discovery.signals import EXCITATIONS, RESPONSES
 from ..rig import RigParams
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("discover", help="find what the rig model misses in measured data, name it, extend it")
+    p = sub.add_parser("discover", help="find what a model misses in measured data, name the cause, extend it")
     p.add_argument("data")
-    base = p.add_mutually_exclusive_group(required=True)
-    base.add_argument("--model", type=Path, help="the rig config (YAML) whose model is the baseline")
-    base.add_argument("--baseline", choices=("linear",), help="linear: a linear model fitted on the training segment")
+    p.add_argument("--model", type=Path, help="a rig config (YAML) whose rig model is the baseline (default: a "
+                                              "modal model fitted to the data)")
+    p.add_argument("--baseline", choices=("modal", "linear"),
+                   help="modal (also 'linear'): a modal model fitted to the data; the default without --model")
     p.add_argument("--excitation", default="base",
-                   help="column[:KIND] of the excitation, KIND base_acceleration (default) or force")
+                   help="COL[:KIND] of the excitation, KIND " + ", ".join(EXCITATIONS) + " (default base:"
+                        "base_acceleration)")
     p.add_argument("--response", action="append",
-                   help="column[:KIND] of a response (repeat), KIND acceleration (default), velocity or displacement; "
-                        "default tip1 and tip2")
+                   help="COL[:KIND] of a response (repeat), KIND " + ", ".join(RESPONSES)
+                        + " (default acceleration); default tip1 and tip2")
     p.add_argument("--time", dest="time_col", help="CSV: time column [s]")
     p.add_argument("--fs", type=float, dest="fs_hz", help="CSV: sampling rate [Hz]")
-    p.add_argument("--train", help="training samples START:STOP (default: rig model, 6 of 10 interleaved blocks; "
-                                   "linear baseline, the first 60 %%)")
-    p.add_argument("--test", help="held-out samples START:STOP (default: rig model, the 3rd, 5th, 8th and 10th "
-                                  "of 10 blocks; linear baseline, the last 40 %%)")
-    p.add_argument("--fit-data", type=Path, help="--baseline linear with a force: fit the linear baseline on this "
-                                                   "file (same columns, e.g. a low-level test) instead of the "
-                                                   "training segment")
+    p.add_argument("--fit-data", type=Path, help="fit the modal baseline on this file (same columns, e.g. a "
+                                                   "low-level test); causes must then hold there too")
+    p.add_argument("--train", help="training samples START:STOP (default: interleaved blocks, 60 %%)")
+    p.add_argument("--test", help="held-out samples START:STOP (default: every 5th block's 3rd and 5th, 40 %%)")
     p.add_argument("--json", type=Path, help="write the result as JSON")
     p.add_argument("--report", type=Path, help="write a report folder (markdown, PNG)")
+    p.add_argument("--force", action="store_true", help="replace an existing --json, write into a non-empty --report")
     p.set_defaults(func=run)
 
 
-def parse_slice(text: str | None, n: int, name: str) -> slice | None:
-    if text is None:
-        return None
-    parts = text.split(":")
-    if len(parts) != 2:
-        raise ValueError(f"--{name} must be START:STOP (sample indices, either may be empty), got {text!r}")
-    try:
-        start = int(parts[0]) if parts[0] else 0
-        stop = int(parts[1]) if parts[1] else n
-    except ValueError:
-        raise ValueError(f"--{name} must hold integers, got {text!r}") from None
-    s = slice(*slice(start, stop).indices(n)[:2])
-    if s.stop - s.start < 100:
-        raise ValueError(f"--{name} {text} selects {max(0, s.stop - s.start)} samples; give at least 100")
-    return s
-
-
-def _load(args):
-    path = Path(args.data)
-    if path.suffix.lower() == ".csv":
-        resp = args.response or ["tip1", "tip2"]
-        if len(resp) != 2:
-            raise ValueError("the rig model has two tips: give two --response columns")
-        kinds = [r.partition(":")[2] or "acceleration" for r in resp] + [args.excitation.partition(":")[2]
-                                                                          or "base_acceleration"]
-        if kinds[:2] != ["acceleration", "acceleration"] or kinds[2] != "base_acceleration":
-            raise ValueError("with --model, responses must be accelerations and the excitation a base acceleration")
-        return open_samples(path, time_col=args.time_col, fs_hz=args.fs_hz, base=args.excitation.partition(":")[0],
-                            tip1=resp[0].partition(":")[0], tip2=resp[1].partition(":")[0])
-    return open_samples(path)
-
-
-def _model(path: Path):
-    """The rig model (``ident.rig.RigParams``) from a YAML file: its ``rig`` section; the rest of a
-    daq config (shaker programme, sensors, daq) is the simulated device's and is ignored here."""
-    import yaml
-
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise ValueError(f"{path}: model file not found") from None
-    except yaml.YAMLError as exc:
-        raise ValueError(f"{path}: not valid YAML: {exc}") from None
+def load_model(path: Path) -> RigParams:
+    """The rig model from a YAML file: its ``rig`` section (a daq config's other sections are the
+    simulated device's and are ignored here)."""
+    data = read_yaml_file(path, "model file")
     if not isinstance(data, dict):
         raise ValueError(f"{path}: a rig model file is a mapping with a 'rig' section")
     return build(RigParams, data.get("rig"), str(path), "rig")
 
 
-def _clean(v):
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
+def _spec(text: str, kinds: tuple[str, ...], default: str, what: str) -> tuple[str, str]:
+    col, _, kind = text.partition(":")
+    kind = kind or default
+    if kind not in kinds:
+        raise ValueError(f"{what} {col!r}: kind {kind!r} is not one of {', '.join(kinds)}")
+    return col, kind
 
 
-def _equation(response: str, effect: str, parameters: dict) -> str:
-    """One finding as the JSON's ``extended.equations`` lists it."""
-    return f"{response}: {effect} ({_params_text(parameters)})"
-
-
-def result_json(d) -> dict:
-    return {
-        "baseline": {"test_nrmse": _clean(d.baseline_test_nrmse)},
-        "extended": {"test_nrmse": _clean(d.extended_test_nrmse),
-                     "equations": [_equation(c.response, c.effect, c.parameters) for c in d.findings]},
-        "gain": _clean(d.gain),
-        "findings": [{"effect": c.effect, "response": c.response, "parameters": c.parameters,
-                      "gain": _clean(c.gain)} for c in d.findings],
-        "candidates": [{"effect": c.effect, "response": c.response, "parameters": c.parameters,
-                        "gain": _clean(c.gain), "test_nrmse": _clean(c.test_nrmse), "fit_r2": c.fit_r2}
-                       for c in d.candidates],
-        "split": split_json(d.train, d.test),
-        "residual_rms_m_per_s2": d.residual_rms,
-    }
-
-
-def _pairs(segs) -> list[list[int]]:
-    return [[s.start, s.stop] for s in ((segs,) if isinstance(segs, slice) else segs)]
-
-
-def split_json(train, test) -> dict:
-    """Training and held-out samples as lists of [start, stop) pairs (one pair for a contiguous split)."""
-    return {"train": _pairs(train), "test": _pairs(test)}
-
-
-def _segments_text(segs) -> str:
-    return ", ".join(f"{a}:{b}" for a, b in _pairs(segs))
-
-
-def _split_kind(spec: str, default: str) -> tuple[str, str]:
-    col, _, kind = spec.partition(":")
-    return col, kind or default
-
-
-def _columns(path: Path, cols: list[str], args) -> tuple[np.ndarray, float]:
-    """Named columns of a CSV or MAT file, or channels (base, tip1, tip2) of a recording."""
+def load_measurement(path: Path, args) -> Measurement:
+    exc = _spec(args.excitation, EXCITATIONS, "base_acceleration", "excitation")
+    resp = [_spec(r, RESPONSES, "acceleration", "response") for r in (args.response or ["tip1", "tip2"])]
+    cols = [exc[0]] + [c for c, _ in resp]
     if path.suffix.lower() in (".csv", ".txt", ".mat"):
-        return read_columns(path, cols, args.time_col, args.fs_hz)
-    s = open_samples(path)
-    roles = {"base": 0, "tip1": 1, "tip2": 2}
-    for c in cols:
-        if c not in roles:
-            raise ValueError(f"a recording has the channels base, tip1, tip2; not {c!r}")
-    return s.values[:, [roles[c] for c in cols]], s.fs_hz
-
-
-def _params_text(parameters: dict) -> str:
-    return ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in parameters.items())
-
-
-def run_linear(args) -> int:
-    """--baseline linear: any CSV, MAT file or recording with an excitation and responses of given kinds."""
-    exc_col, exc_kind = _split_kind(args.excitation, "base_acceleration")
-    if exc_kind not in KINDS_EXCITATION:
-        raise ValueError(f"excitation kind {exc_kind!r} is not one of {', '.join(KINDS_EXCITATION)}")
-    specs = [_split_kind(r, "acceleration") for r in (args.response or ["tip1", "tip2"])]
-    for col, kind in specs:
-        if kind not in KINDS_RESPONSE:
-            raise ValueError(f"response kind {kind!r} of {col!r} is not one of {', '.join(KINDS_RESPONSE)}")
-    cols = [exc_col] + [c for c, _ in specs]
-    names = [c for c, _ in specs]
-    data, fs = _columns(Path(args.data), cols, args)
-    n = len(data)
-    train, test = parse_slice(args.train, n, "train"), parse_slice(args.test, n, "test")
-    if exc_kind == "force":
-        return _run_modal(args, data, fs, names, specs, cols, train, test)
-    if args.fit_data:
-        raise ValueError("--fit-data needs a force excitation (COL:force); with a base acceleration the linear "
-                         "baseline is fitted on the training segment")
-    d = discover_linear(data[:, 0], data[:, 1:], names, [k for _, k in specs], exc_kind, fs, train=train, test=test)
-    js = {"baseline": {"test_nrmse": d.baseline_test_nrmse}, "extended": {
-        "test_nrmse": d.extended_test_nrmse,
-        "equations": [_equation(f["response"], f["effect"], f["parameters"]) for f in d.findings]},
-        "gain": d.gain, "findings": d.findings, "candidates": d.candidates,
-        "split": split_json(d.train, d.test),
-        "residual_rms": d.residual_rms}
-    print(f"linear baseline test NRMSE {d.baseline_test_nrmse:.4f}"
-          + (" (its simulation diverges: capped at 1, the error of predicting nothing)"
-             if d.baseline_test_nrmse >= 1.0 else ""))
-    print("findings: " + ("; ".join(js["extended"]["equations"]) or "nothing found; residual force RMS "
-                          + ", ".join(f"{k} {v:.3g}" for k, v in d.residual_rms.items())))
-    print(f"extended test NRMSE {d.extended_test_nrmse:.4f}, gain {d.gain:.3f}")
-    _write_json(args.json, js)
-    if args.report:
-        args.report.mkdir(parents=True, exist_ok=True)
-        _plot_ranking(args.report / "ranking.png",
-                      [(f"{c['effect']} ({c['response']})", c["gain"], c["gain"] > 0.05) for c in d.candidates])
-        _write_report(args.report, js, [
-            "# Discovery (linear baseline)", "",
-            f"A linear model of the same structure (each response's relative acceleration linear in all "
-            f"displacements, velocities and the excitation) fitted on samples {d.train.start}:{d.train.stop}, "
-            f"simulated over {d.test.start}:{d.test.stop}: test NRMSE {d.baseline_test_nrmse:.4f}; extended "
-            f"{d.extended_test_nrmse:.4f}; gain {d.gain:.3f}.", "",
-            "Findings: " + ("; ".join(js["extended"]["equations"]) or _nothing(d.residual_rms, "m/s^2")), "",
-            "| effect | response | gain | parameters |", "|---|---|---|---|",
-            *[f"| {c['effect']} | {c['response']} | {c['gain']:.3f} | {_params_text(c['parameters'])} |"
-              for c in d.candidates], "", "![ranking](ranking.png)", ""])
-    return 0
-
-
-def _nothing(residual_rms: dict, unit: str) -> str:
-    return ("nothing found: no cause gains more than 5 % on the held-out segment. The residual (RMS "
-            + ", ".join(f"{k} {v:.3g} {unit}" for k, v in residual_rms.items())
-            + ") is what the baseline leaves; its spectrum and portraits below show its shape.")
-
-
-def _run_modal(args, data, fs, names, specs, cols, train, test) -> int:
-    """A force-excited structure: modal baseline, internal forces at or between the responses."""
-    if any(k != "acceleration" for _, k in specs):
-        raise ValueError("with a force excitation the linear baseline is a modal model of accelerations: "
-                         "give acceleration responses (the first at the driving point)")
-    fit = None
-    if args.fit_data:
-        fd, ffs = _columns(args.fit_data, cols, args)
-        if abs(ffs - fs) > 1e-6 * fs:
-            raise ValueError(f"{args.fit_data} is sampled at {ffs:g} Hz, {args.data} at {fs:g} Hz")
-        fit = (fd[:, 0], fd[:, 1:])
-    d = discover_modal(data[:, 0], data[:, 1:], names, fs, fit_data=fit, train=train, test=test)
-    fit_where = f"{args.fit_data} (all of it)" if fit else f"samples {d.train.start}:{d.train.stop}"
-
-    def cand(c):
-        return {"effect": c.effect, "response": c.response, "parameters": c.parameters, "gain": _clean(c.gain),
-                "test_nrmse": _clean(c.test_nrmse), "fit_r2": c.fit_r2,
-                "fit_data_nrmse": _clean(c.fit_data_nrmse), "holds_at_fit_level": c.holds_at_fit_level}
-
-    eqs = [_equation(c.response, c.effect, c.parameters) for c in d.findings]
-    js = {"baseline": {"test_nrmse": d.baseline_test_nrmse, "fit_data_nrmse": _clean(d.baseline_fit_nrmse),
-                       "fitted_on": fit_where,
-                       "modes": [{"frequency_hz": float(f), "damping_ratio": float(z)}
-                                 for f, z in zip(d.model.frequencies_hz, d.model.damping_ratios)]},
-          "extended": {"test_nrmse": d.extended_test_nrmse, "equations": eqs},
-          "gain": d.gain, "findings": [cand(c) for c in d.findings], "candidates": [cand(c) for c in d.candidates],
-          "split": split_json(d.train, d.test),
-          "residual_rms": d.residual_rms}
-    holds = (" It does not hold on the baseline data (NRMSE there {:.3f} against the baseline's {:.3f}): no "
-             "catalogue term explains both levels; the change depends on the amplitude.".format(
-                 d.findings[0].fit_data_nrmse, d.baseline_fit_nrmse)
-             if d.findings and not d.findings[0].holds_at_fit_level else "")
-    print(f"modal baseline ({d.model.poles.size} modes, fitted on {fit_where}) test NRMSE "
-          f"{d.baseline_test_nrmse:.4f}" + (f"; on its own data {d.baseline_fit_nrmse:.4f}" if fit else ""))
-    print("findings: " + ("; ".join(eqs) or _nothing(d.residual_rms, "m/s^2")) + holds)
-    print(f"extended test NRMSE {d.extended_test_nrmse:.4f}, gain {d.gain:.3f}")
-    _write_json(args.json, js)
-    if args.report:
-        _report_modal(args.report, d, js, data, fs, names, fit_where, holds)
-        print(f"wrote {args.report / 'README.md'}")
-    return 0
-
-
-def _write_json(path: Path | None, js: dict) -> None:
-    if path:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(js, indent=2, default=_clean))
-
-
-def _write_report(folder: Path, js: dict, lines: list[str]) -> None:
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "README.md").write_text("\n".join(lines))
-    (folder / "result.json").write_text(json.dumps(js, indent=2, default=_clean))
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _plot_ranking(path: Path, rows: list[tuple[str, float, bool]], floor: float = 0.05, top: int = 12) -> None:
-    """Bar chart of candidate gains on the held-out segment; chosen ones in red."""
-    plt = _plt()
-    rows = [r for r in rows if r[1] is not None and np.isfinite(r[1])][:top]
-    fig, ax = plt.subplots(figsize=(8, 0.35 * len(rows) + 1.2))
-    ax.barh([r[0] for r in rows][::-1], [max(r[1], -1.0) for r in rows][::-1],
-            color=["C3" if r[2] else "C7" for r in rows][::-1])
-    ax.axvline(floor, color="k", lw=0.8, ls="--")
-    ax.set(xlabel="gain on the held-out segment (1 - NRMSE extended / baseline)", title="candidate causes")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
-def _plot_time_psd(path: Path, t, meas, base, ext, names: list[str], fs: float, fmax: float) -> None:
-    """Per response: measured, baseline and extended over 3 s; spectra of the measurement and residuals."""
-    from scipy.signal import welch
-
-    plt = _plt()
-    k = meas.shape[1]
-    gaps = np.flatnonzero(np.diff(t) > 1.5 / fs)  # held-out blocks are concatenated: stay in the first
-    show = slice(0, min(len(t), int(3 * fs), int(gaps[0]) + 1 if gaps.size else len(t)))
-    nper = min(4096, len(meas))
-    fig, ax = plt.subplots(k, 2, figsize=(12, 3.2 * k + 0.5), sharex="col", squeeze=False)
-    for i in range(k):
-        ax[i, 0].plot(t[show], meas[show, i], "k", lw=1.2, label="measured")
-        ax[i, 0].plot(t[show], base[show, i], "C0--", lw=1, label="baseline")
-        ax[i, 0].plot(t[show], ext[show, i], "C3:", lw=1.5, label="extended")
-        ax[i, 0].set(ylabel=f"{names[i]} [m/s^2]")
-        f, p_meas = welch(meas[:, i], fs, nperseg=nper)
-        _, p_res = welch(meas[:, i] - base[:, i], fs, nperseg=nper)
-        _, p_ext = welch(meas[:, i] - ext[:, i], fs, nperseg=nper)
-        ax[i, 1].semilogy(f, p_meas, "k", lw=1, label="measured")
-        ax[i, 1].semilogy(f, p_res, "C0", lw=1, label="residual of the baseline")
-        ax[i, 1].semilogy(f, p_ext, "C3", lw=1, label="residual of the extended model")
-        ax[i, 1].set(xlim=(0, fmax), ylim=(float(np.max(p_meas)) * 1e-8, float(np.max(p_meas)) * 10), ylabel="PSD")
-    ax[0, 0].legend(fontsize=8)
-    ax[0, 1].legend(fontsize=8)
-    ax[-1, 0].set(xlabel="t [s] (held-out data)")
-    ax[-1, 1].set(xlabel="frequency [Hz] (harmonics the baseline cannot make stand out)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
-def _plot_portraits(path: Path, rows: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], unit: str) -> None:
-    """Residual against displacement and velocity of each coordinate: (name, z, v, residual)."""
-    plt = _plt()
-    fig, ax = plt.subplots(len(rows), 2, figsize=(11, 3.5 * len(rows)), squeeze=False)
-    for i, (name, z, v, res) in enumerate(rows):
-        ax[i, 0].plot(z * 1e3, res, ",", alpha=0.5)
-        ax[i, 0].set(xlabel=f"{name} displacement [mm]", ylabel=f"residual [{unit}]",
-                     title=f"{name}: residual against displacement")
-        ax[i, 1].plot(v, res, ",", alpha=0.5)
-        ax[i, 1].set(xlabel=f"{name} velocity [m/s]", title=f"{name}: residual against velocity")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
-def _report_modal(folder: Path, d, js: dict, data, fs: float, names: list[str], fit_where: str, holds: str) -> None:
-    folder.mkdir(parents=True, exist_ok=True)
-    Y = data[:, 1:]
-    te, tr = d.test, d.train
-    _plot_time_psd(folder / "baseline_extended_measured.png", np.arange(te.start, te.stop) / fs, Y[te],
-                   d.baseline_sim[te], d.extended_sim[te], names, fs, min(0.45 * fs, 60.0))
-    _plot_ranking(folder / "ranking.png", [(f"{c.effect} ({c.response})", c.gain, c in d.findings)
-                                           for c in d.candidates])
-    v, z = integrate_band(Y, fs, F_LO_HZ)
-    res = Y - d.baseline_sim
-    rows = [(names[j], z[tr, j], v[tr, j], res[tr, j]) for j in range(Y.shape[1])]
-    if d.findings and "-" in d.findings[0].response:
-        a, b = (names.index(x) for x in d.findings[0].response.split("-"))
-        rows.append((d.findings[0].response, z[tr, a] - z[tr, b], v[tr, a] - v[tr, b], res[tr, a] - res[tr, b]))
-    _plot_portraits(folder / "residual_portraits.png", rows, "m/s^2")
-    modes = ", ".join(f"{m['frequency_hz']:.2f} Hz ({100 * m['damping_ratio']:.2f} %)" for m in js["baseline"]["modes"])
-    cand_rows = [f"| {c['effect']} | {c['response']} | {c['gain']:.3f} | {c['fit_data_nrmse'] or float('nan'):.3f} | "
-                 f"{_params_text(c['parameters'])} |" for c in js["candidates"] if c["gain"] is not None]
-    _write_report(folder, js, [
-        "# Discovery (modal linear baseline, force excitation)", "",
-        f"Baseline: a linear modal model (receptances with common poles by vector fitting of the H1 frequency "
-        f"response, residues refitted in the time domain) fitted on {fit_where}, driven by the measured force "
-        f"from rest. Modes (damping ratio): {modes}.", "",
-        f"Test NRMSE (samples {te.start}:{te.stop}, accelerations, mean over responses): baseline "
-        f"{d.baseline_test_nrmse:.4f}" + (f" (on its own data {d.baseline_fit_nrmse:.4f})"
-                                          if np.isfinite(d.baseline_fit_nrmse) else "")
-        + f"; extended {d.extended_test_nrmse:.4f}; gain {d.gain:.3f}.", "",
-        "Findings: " + ("; ".join(js["extended"]["equations"]) or _nothing(d.residual_rms, "m/s^2")) + holds, "",
-        "Physical coordinates: displacement and velocity of every response by trapezoid integration with a "
-        f"zero-phase {F_LO_HZ:g} Hz high-pass after each integration (drift removed); a pair 'A-B' is the "
-        "relative motion of A against B. A candidate is an internal force at a response (grounded) or between a "
-        "pair (+f on A, -f on B), entering each mode through the gains reciprocity gives (response 1 is the "
-        "driving point), so its parameters are in newtons and metres. Its coefficient is fitted by least squares "
-        "to the residual on the training segment, then the extended model runs closed loop over the held-out "
-        "segment. 'NRMSE on fit data' reruns it on the baseline's data: a cause that depends on amplitude "
-        "must leave the low level as it was.", "",
-        "## Candidates, ranked by gain on the held-out segment", "",
-        "| effect | coordinate | gain | NRMSE on fit data | parameters |", "|---|---|---|---|---|", *cand_rows, "",
-        "![ranking](ranking.png)", "",
-        "## Baseline, extended model and measurement on the held-out segment", "",
-        "![baseline, extended, measured](baseline_extended_measured.png)", "",
-        "## Residual (measured minus baseline accelerations) against the states (training segment)", "",
-        "![residual portraits](residual_portraits.png)", ""])
+        data, fs = read_column_matrix(path, cols, args.time_col, args.fs_hz)
+    else:
+        s = read_samples(path)
+        roles = {"base": 0, "tip1": 1, "tip2": 2}
+        missing = [c for c in cols if c not in roles]
+        if missing:
+            raise ValueError(f"a recording has the channels base, tip1, tip2; not {missing[0]!r}")
+        data, fs = s.values[:, [roles[c] for c in cols]], s.fs_hz
+    return Measurement(float(fs), Channel(exc[0], exc[1], data[:, 0]),
+                       tuple(Channel(c, k, data[:, 1 + i]) for i, (c, k) in enumerate(resp)))
 
 
 def run(args) -> int:
-    if args.baseline == "linear":
-        return run_linear(args)
-    s = _load(args)
-    nominal = _model(args.model)
-    n = len(s.t)
-    train, test = parse_slice(args.train, n, "train"), parse_slice(args.test, n, "test")
-    d = discover(s.values, s.fs_hz, nominal, train=train, test=test)
-    js = result_json(d)
-    split = "given" if args.train or args.test else "default: 10 equal blocks, the 3rd, 5th, 8th, 10th held out"
-    print(f"baseline test NRMSE {d.baseline_test_nrmse:.4f}; split {split} "
-          f"(train {_segments_text(d.train)}; test {_segments_text(d.test)})")
-    if not d.findings:
-        print(_nothing(d.residual_rms, "m/s^2"))
-    for c in d.findings:
-        print(f"found {c.effect} on {c.response}: {_params_text(c.parameters)}; gain {c.gain:.3f}")
-    print(f"extended test NRMSE {d.extended_test_nrmse:.4f}, gain {d.gain:.3f}")
-    _write_json(args.json, js)
+    inputs = [args.data, args.model, args.fit_data]
+    check_outputs([Output("--json", args.json), Output("--report", args.report, folder=True)], inputs, args.force)
+    m = load_measurement(Path(args.data), args)
+    fit = load_measurement(args.fit_data, args) if args.fit_data else None
+    if args.model and args.baseline:
+        raise ValueError("give --model (the rig model) or --baseline modal, not both")
+    if args.model and fit is not None:
+        raise ValueError("--fit-data fits a modal baseline; with --model the baseline is the config's rig model")
+    rig = load_model(args.model) if args.model else None
+    train, test = parse_split(args.train, args.test, m.n)
+    d = discover(m, rig=rig, fit_data=fit, train=train, test=test)
+    print(summary(d))
+    if args.json:
+        with safe_output(args.json, inputs=inputs, force=args.force, label="--json") as tmp:
+            tmp.write_text(json.dumps(to_json(d), indent=2))
     if args.report:
-        _report(args.report, d, js, s)
-        print(f"wrote {args.report / 'README.md'}")
+        with safe_folder(args.report, inputs=inputs, force=args.force) as folder:
+            write_report(d, folder)
+        print(f"report: {args.report}/report.md")
     return 0
 
 
-def _report(folder: Path, d, js: dict, s) -> None:
-    folder.mkdir(parents=True, exist_ok=True)
-    fs = s.fs_hz
-    base, tips, z, v, r, base_full = coordinates(s.values, fs)
-    # held-out blocks, the one the baseline misses most first (its first 3 s are plotted)
-    blocks = [(seg, *simulated_tips(d.nominal, base, tips, z, v, fs, (seg,))) for seg in d.test]
-    blocks.sort(key=lambda b: -float(np.mean((b[1] - b[2]) ** 2)))
-    test = tuple(b[0] for b in blocks)
-    meas, base_sim = np.concatenate([b[1] for b in blocks]), np.concatenate([b[2] for b in blocks])
-    _, ext_sim = simulated_tips(d.extended, base, tips, z, v, fs, test, d.extended_output)
-    _plot_time_psd(folder / "baseline_extended_measured.png", indices(test) / fs, meas,
-                   base_sim, ext_sim, ["tip 1", "tip 2"], fs, 60.0)
-    _plot_ranking(folder / "ranking.png", [(f"{c['effect']} ({c['response']})", c["gain"], c["gain"] > 0.05)
-                                           for c in js["candidates"]])
-    tr = indices(d.train)
-    _plot_portraits(folder / "residual_portraits.png",
-                    [(f"tip {i + 1}", z[tr, i], v[tr, i], r[tr, i] - _beam_rhs(d.nominal, i, z[tr], v[tr],
-                                                                              base_full[tr])) for i in range(2)],
-                    "m/s^2 (force per mass)")
-    rows = [f"| {c['effect']} | {c['response']} | {c['gain']:.3f} | {_params_text(c['parameters'])} |"
-            for c in js["candidates"] if c["gain"] is not None]
-    _write_report(folder, js, [
-        "# Discovery", "",
-        f"Baseline (the nominal rig model driven by the measured base acceleration) test NRMSE "
-        f"{d.baseline_test_nrmse:.4f}; extended {d.extended_test_nrmse:.4f}; gain {d.gain:.3f}.", "",
-        "Findings: " + ("; ".join(js["extended"]["equations"]) or _nothing(d.residual_rms, "m/s^2")), "",
-        "Physical coordinates: relative acceleration (tip minus base), integrated to velocity and "
-        "displacement by the trapezoid rule with a zero-phase 2 Hz high-pass after each integration "
-        "(drift removed). Held-out samples " + _segments_text(d.test) + ", training " + _segments_text(d.train)
-        + ". Scores: NRMSE of the tip accelerations below 50 Hz over the held-out samples, each block "
-        f"simulated from the measured state {warm_up_s(d.nominal):.1f} s (five decay times) before it, so the "
-        "start state's error has died out. Each cause's coefficients are regressed on the residual force, "
-        "then the leading ones are refined by simulation error on training data (a contact's side, gap and "
-        "stiffness whenever it explains 5 % of the residual force); a cause with more parameters must gain "
-        "0.02 more than a simpler one.", "",
-        "## Candidates, ranked by gain on the held-out data", "",
-        "| effect | response | gain | parameters |", "|---|---|---|---|", *rows, "",
-        "![ranking](ranking.png)", "",
-        "## Baseline, extended model and measurement on the held-out data", "",
-        "The held-out block the baseline misses most, then the spectra over all held-out blocks.", "",
-        "![baseline, extended, measured](baseline_extended_measured.png)", "",
-        "## Residual force against the states (training data)", "",
-        "A dead zone (contact), a cubic, a step at zero velocity (friction) look different here.", "",
-        "![residual portraits](residual_portraits.png)", ""])
+def summary(d: Discovery) -> str:
+    model = d.baseline.model
+    modes = ", ".join(f"{f:.3g} Hz" for f in model.frequencies_hz)
+    lines = [f"baseline: {d.baseline.label} ({model.poles.size} modes: {modes}); band {d.prep.band[0]:.3g}-"
+             f"{d.prep.band[1]:.3g} Hz; held-out NRMSE {d.baseline_test_nrmse:.4f}"]
+    lines += [f"  {n}" for n in d.prep.sign_notes if not n.startswith("signs: kept")]
+    lines.append(d.verdict())
+    if d.findings:
+        lines.append(f"extended model: held-out NRMSE {d.extended_test_nrmse:.4f}, gain {d.gain:.3f} "
+                     f"(against predicting zero: {d.gain_vs_zero:.3f})")
+        for f in d.findings:
+            lines.append("  " + ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}"
+                                         for k, v in f.parameters.items())
+                         + (f"  [{', '.join(f'{k} = {v:.4g}' for k, v in f.physical.items())}]" if f.physical else ""))
+    else:
+        lines.append("residual RMS on training data: " + ", ".join(f"{k} {v:.3g}" for k, v in d.residual_rms.items()))
+    lines += [f"note: {n}" for n in d.notes[1 if not d.findings else 0:]]
+    return "\n".join(lines)
+
+
+# --- report -------------------------------------------------------------------------------------------
+
+
+def write_report(d: Discovery, folder: Path) -> None:
+    _ranking(d, folder / "ranking.png")
+    _time_and_spectrum(d, folder / "baseline_extended_measured.png")
+    _restoring_force(d, folder / "restoring_force.png")
+    rows = "\n".join(f"| {c.cause} | {c.location} | {c.gain:.3f} | {c.p_value:.2g} | {c.test_nrmse:.4f} | "
+                     f"{'yes' if c.refined else 'no'} | {_params(c.parameters)} |" for c in d.candidates[:20])
+    text = f"""# Discovery
+
+{d.verdict()}
+
+- Baseline: {d.baseline.label}; held-out NRMSE {d.baseline_test_nrmse:.4f}
+- Analysis band: {d.prep.band[0]:.3g}-{d.prep.band[1]:.3g} Hz; held-out: {len(d.split.test)} blocks
+  ({', '.join(f'{s.start}:{s.stop}' for s in d.split.test)})
+- Extended model: held-out NRMSE {d.extended_test_nrmse:.4f}, gain {d.gain:.3f}, against predicting zero
+  {d.gain_vs_zero:.3f}
+{''.join(f'- {n}{chr(10)}' for n in d.prep.sign_notes + d.notes)}
+## Candidates (best 20 by held-out gain; p: paired test against the baseline over held-out pieces)
+
+| cause | location | gain | p | held-out NRMSE | refined | parameters |
+|---|---|---|---|---|---|---|
+{rows}
+
+![ranking](ranking.png)
+
+![time and spectrum](baseline_extended_measured.png)
+
+![restoring force](restoring_force.png)
+"""
+    (folder / "report.md").write_text(text)
+
+
+def _params(p: dict) -> str:
+    return ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in p.items())
+
+
+def _ranking(d: Discovery, path: Path) -> None:
+    cands = [c for c in d.candidates if np.isfinite(c.gain)][:15]
+    fig, ax = plt.subplots(figsize=(8, 0.35 * len(cands) + 1.6))
+    chosen = {f.label for f in d.findings}
+    labels = [f"{c.cause} at {c.location}{' (refined)' if c.refined else ''}" for c in cands]
+    colors = ["tab:green" if c.label in chosen and c.refined else "tab:blue" if c.p_value < 0.05 else "tab:gray"
+              for c in cands]
+    ax.barh(range(len(cands)), [c.gain for c in cands], color=colors)
+    ax.set_yticks(range(len(cands)), labels, fontsize=8)
+    ax.invert_yaxis()
+    ax.axvline(0.03, color="k", ls="--", lw=1, label="gain floor 0.03")
+    ax.set_xlabel("held-out gain, 1 - NRMSE extended / NRMSE baseline")
+    ax.set_title("Causes ranked by held-out gain (green: the finding; blue: significant, p < 0.05)")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _time_and_spectrum(d: Discovery, path: Path) -> None:
+    prep = d.prep
+    blocks = list(d.split.test)[:3]
+    k = len(prep.names)
+    fig, axes = plt.subplots(k, len(blocks) + 1, figsize=(4 * (len(blocks) + 1), 2.6 * k), squeeze=False)
+    units = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s$^2$"}
+    for j, seg in enumerate(blocks):
+        base = predict(d.baseline, d.baseline.model, prep, seg, d.warm)
+        own = d.findings[0].baseline if d.findings and d.findings[0].baseline else d.baseline
+        ext = predict(own, d.extended, prep, seg, d.warm, d.extended_output)
+        t = np.arange(seg.start, seg.stop) / prep.fs_hz
+        for i in range(k):
+            ax = axes[i, j]
+            ax.plot(t, prep.measured[seg, i], "k", lw=1, label="measured")
+            ax.plot(t, base[:, i], "tab:red", lw=0.8, label="baseline")
+            if d.findings:
+                ax.plot(t, ext[:, i], "tab:green", lw=0.8, ls="--", label="extended")
+            ax.set_title(f"{prep.names[i]}, held-out block {seg.start / prep.fs_hz:.1f}-{seg.stop / prep.fs_hz:.1f} s",
+                         fontsize=8)
+            ax.set_xlabel("time [s]")
+            ax.set_ylabel(f"{prep.kinds[i]} [{units[prep.kinds[i]]}]", fontsize=8)
+    axes[0, 0].legend(fontsize=7, loc="upper right")
+    for i in range(k):
+        ax = axes[i, -1]
+        rows = d.split.rows("test")
+        nper = min(len(rows), int(2 ** np.floor(np.log2(max(64, prep.fs_hz / prep.band[0] * 8)))))
+        f, p = welch(prep.measured[rows, i], prep.fs_hz, nperseg=nper)
+        ax.semilogy(f, p, "k", lw=1, label="measured")
+        res = np.concatenate([prep.measured[s, i] - predict(d.baseline, d.baseline.model, prep, s, d.warm)[:, i]
+                              for s in d.split.test])
+        ax.semilogy(*welch(res, prep.fs_hz, nperseg=nper), "tab:red", lw=0.8, label="baseline residual")
+        ax.set_xlim(0, prep.band[1])
+        ax.set_xlabel("frequency [Hz]")
+        ax.set_ylabel(f"PSD [({units[prep.kinds[i]]})$^2$/Hz]", fontsize=8)
+        ax.set_title(f"{prep.names[i]}: spectra over the held-out blocks", fontsize=8)
+        ax.legend(fontsize=7)
+    fig.suptitle(d.verdict(), fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def _restoring_force(d: Discovery, path: Path) -> None:
+    loc = d.findings[0].location if d.findings else max(d.characterisation,
+                                                        key=lambda k: d.characterisation[k]["explained"])
+    ch = d.characterisation.get(loc, {})
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.4))
+    if "displacement" in ch:
+        a1.plot(np.array(ch["displacement"]) * 1e3, ch["stiffness_force_per_mass"], "o-", label="estimated")
+        a2.plot(ch["velocity"], ch["damping_force_per_mass"], "o-", label="estimated")
+    a1.set_xlabel("displacement [mm]")
+    a1.set_ylabel("missing force per modal mass [m/s$^2$]")
+    a1.set_title(f"stiffness curve at {loc}")
+    a2.set_xlabel("velocity [m/s]")
+    a2.set_ylabel("missing force per modal mass [m/s$^2$]")
+    a2.set_title(f"damping curve at {loc}")
+    share = ch.get("explained", 0.0)
+    fig.suptitle(f"Restoring-force curves of what the baseline misses at {loc} "
+                 f"(they explain {100 * share:.0f} % of the training residual)", fontsize=9)
+    for a in (a1, a2):
+        a.axhline(0, color="k", lw=0.5)
+        a.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+

@@ -1,0 +1,193 @@
+"""``ident bench discovery``: seeded hidden-effect cases, discovery run on each, judged against the truth.
+
+Two generators: ``independent`` (``daq.sim.independent``: finite-element beams, a Duffing oscillator, a
+chain of masses, a clamped-clamped beam; its own equations and integrator, importing nothing from
+``ident``) and ``rig`` (``daq.sim.hidden``: this project's own rig model with one effect switched on, the
+easy test). Prints the confusion table (true against named, with "ambiguous" and "nothing" as
+columns), false extra findings, parameter errors and gains, and the run time per case.
+
+A case is named right when the first finding (not ambiguous) has the true cause at the true location:
+the sensor at the effect, or for an element between two sensors that pair (in either order, as a
+difference or a sum). A finding beyond the true one, or any finding in a "none" case, is a false extra
+finding.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+from daq.sim.hidden import hidden_case
+from daq.sim.independent.cases import discovery_case
+
+from ..discovery import Channel, Measurement, discover
+from ..rig import RigParams
+
+SYNONYMS = {"friction_joint": "hysteretic_joint", "geometric_hardening": "cubic_stiffness"}
+# the truth's parameter and the finding's (both per unit modal mass at the location, or a gap)
+COMPARED = {"contact": ("gap", "gap"), "cubic_stiffness": ("coefficient_per_mass", "coefficient_per_mass"),
+            "quadratic_stiffness": ("coefficient_per_mass", "coefficient_per_mass"),
+            "coulomb_friction": ("force_per_mass", "force_per_mass"),
+            "quadratic_damping": ("coefficient_per_mass", "coefficient_per_mass"),
+            "linear_mismatch": ("stiffness_per_mass", "stiffness_per_mass"),
+            "sensor_gain": ("gain_error", "gain_error"), "clipping": ("range_m_per_s2", "range"),
+            "hysteretic_joint": ("stiffness_per_mass", "stiffness_per_mass")}
+
+
+@dataclass
+class Case:
+    seed: int
+    family: str
+    measurement: Measurement
+    rig: RigParams | None
+    cause: str  # in this catalogue's names, or "none"
+    location: str  # a column, or "A-B"
+    truth: dict  # parameters in this catalogue's names
+    info: str = ""
+
+
+@dataclass
+class Verdict:
+    seed: int
+    family: str
+    cause: str
+    named: str  # the first finding's cause, "ambiguous" or "nothing"
+    location: str
+    right: bool
+    extra: int  # false extra findings
+    parameter_error: float | None
+    gain: float | None
+    seconds: float
+    info: str = ""
+    detail: list = field(default_factory=list)
+
+
+def rig_case(seed: int) -> Case:
+    c = hidden_case(seed, fs_hz=1000.0)
+    m = Measurement(c.fs_hz, Channel("base", "base_acceleration", c.values[:, 0]),
+                    (Channel("tip1", "acceleration", c.values[:, 1]), Channel("tip2", "acceleration", c.values[:, 2])))
+    return Case(seed, f"rig ({c.excitation})", m, c.nominal, c.effect, f"tip{c.beam}", dict(c.truth))
+
+
+def _same_location(found: str, truth: str) -> bool:
+    parts = lambda s: frozenset(s.replace("+", "-").split("-"))  # noqa: E731
+    return parts(found) == parts(truth)
+
+
+def judge(case: Case, d, seconds: float) -> Verdict:
+    cause = SYNONYMS.get(case.cause, case.cause)
+    findings = d.findings
+    if not findings:
+        named, loc, right = "nothing", "", cause == "none"
+    elif d.ambiguous[0]:
+        named, loc, right = "ambiguous", findings[0].location, False
+    else:
+        named, loc = findings[0].cause, findings[0].location
+        right = cause != "none" and named == cause and _same_location(loc, case.location)
+    extra = len(findings) if cause == "none" else max(0, len(findings) - 1) + (0 if right or not findings else 0)
+    if cause != "none" and findings and not right:
+        extra = len(findings) - (1 if any(f.cause == cause and _same_location(f.location, case.location)
+                                          for f in findings) else 0)
+    perr = gain = None
+    if right and cause in COMPARED:
+        tkey, fkey = COMPARED[cause]
+        if tkey in case.truth and fkey in findings[0].parameters and case.truth[tkey]:
+            perr = abs(findings[0].parameters[fkey] / case.truth[tkey] - 1)
+        gain = findings[0].gain
+    return Verdict(case.seed, case.family, cause, named, loc, right, extra, perr, gain, seconds, case.info,
+                   [f"{f.label} gain {f.gain:.2f}" for f in findings])
+
+
+def run_case(args: tuple[str, int]) -> Verdict:
+    generator, seed = args
+    case = rig_case(seed) if generator == "rig" else independent_case(seed)
+    t0 = time.perf_counter()
+    try:
+        d = discover(case.measurement, rig=case.rig)
+    except Exception as exc:  # noqa: BLE001 - a benchmark counts a crash as an error row and goes on
+        return Verdict(seed, case.family, SYNONYMS.get(case.cause, case.cause), f"error: {exc}", "", False, 0, None,
+                       None, time.perf_counter() - t0, case.info)
+    return judge(case, d, time.perf_counter() - t0)
+
+
+def independent_case(seed: int) -> Case:
+    c = discovery_case(seed)
+    t = c.truth
+    col, kind = t["excitation"].split(":")
+    responses = tuple(Channel(n, k, np.asarray(c.columns[n], float)) for n, k in (r.split(":") for r in t["responses"]))
+    m = Measurement(float(c.fs_hz), Channel(col, kind, np.asarray(c.columns[col], float)), responses)
+    eq = t.get("equivalent", {})
+    cause = SYNONYMS.get(t["cause"], t["cause"])
+    truth = {}
+    if cause == "contact":
+        truth = {"gap": eq.get("gap_m"), "side": eq.get("side"), "stiffness_per_mass": eq.get("contact_stiffness_per_mass")}
+    elif cause == "cubic_stiffness":
+        truth = {"coefficient_per_mass": eq.get("k3_per_mass")}
+    elif cause == "coulomb_friction":
+        truth = {"force_per_mass": eq.get("slip_force_per_mass")}
+    elif cause == "quadratic_damping":
+        truth = {"coefficient_per_mass": eq.get("coefficient_per_mass")}
+    elif cause == "hysteretic_joint" and "joint_stiffness_per_mass" in eq:
+        truth = {"stiffness_per_mass": eq["joint_stiffness_per_mass"] - eq.get("slipping_stiffness_per_mass", 0.0)}
+    info = (f"{c.fs_hz:.0f} Hz, strength {t.get('effect_strength', 0):.2f}, "
+            f"{len(t.get('unmeasured_blows') or [])} blows, signs {''.join('+' if v > 0 else '-' for v in t['signs'].values())}")
+    return Case(seed, c.family, m, None, cause, t.get("location") or "", truth, info)
+
+
+def report(verdicts: list[Verdict], wall_s: float) -> str:
+    causes = sorted({v.cause for v in verdicts})
+    named = sorted({v.named for v in verdicts if v.named not in ("ambiguous", "nothing")
+                    and not v.named.startswith("error")} - set(causes))
+    cols = causes + named + ["ambiguous", "nothing", "error"]
+    conf = Counter((v.cause, v.named if not v.named.startswith("error") else "error") for v in verdicts)
+    lines = [f"confusion (rows true, columns named first), {len(verdicts)} cases:",
+             " " * 19 + "".join(f"{c[:10]:>11s}" for c in cols)]
+    for tr in causes:
+        lines.append(f"{tr:19s}" + "".join(f"{conf[(tr, c)]:11d}" for c in cols))
+    n = len(verdicts)
+    right = sum(v.right for v in verdicts)
+    clean = sum(v.extra == 0 for v in verdicts)
+    none = [v for v in verdicts if v.cause == "none"]
+    lines.append(f"named right (cause and location): {right}/{n} = {100 * right / n:.1f} %")
+    lines.append(f"cases without a false extra finding: {clean}/{n} = {100 * clean / n:.1f} %")
+    lines.append(f"'none' cases with a finding: {sum(v.named not in ('nothing',) for v in none)}/{len(none)}")
+    for c in causes:
+        errs = [v.parameter_error for v in verdicts if v.cause == c and v.parameter_error is not None]
+        gains = [v.gain for v in verdicts if v.cause == c and v.gain is not None]
+        if errs:
+            lines.append(f"{c:19s} parameter error median {100 * np.median(errs):.1f} %, max {100 * np.max(errs):.1f} %"
+                         f" ({len(errs)} cases); gain median {np.median(gains):.2f}, min {np.min(gains):.2f}")
+    secs = [v.seconds for v in verdicts]
+    lines.append(f"run time per case: median {np.median(secs):.1f} s, max {np.max(secs):.1f} s; "
+                 f"wall {wall_s:.0f} s")
+    return "\n".join(lines)
+
+
+def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: int = 1) -> int:
+    t0 = time.perf_counter()
+    jobs = [(generator, s) for s in range(first_seed, first_seed + n_cases)]
+    verdicts = []
+    if workers > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            it = pool.map(run_case, jobs)
+            for v in it:
+                verdicts.append(v)
+                _print(v)
+    else:
+        for job in jobs:
+            v = run_case(job)
+            verdicts.append(v)
+            _print(v)
+    print()
+    print(report(verdicts, time.perf_counter() - t0))
+    return 0
+
+
+def _print(v: Verdict) -> None:
+    mark = "" if v.right else "  WRONG"
+    print(f"case {v.seed:4d} {v.family:12s} {v.cause:18s} -> {v.named:18s} {v.location:10s}"
+          f"{'' if v.extra == 0 else f' +{v.extra} extra'}{mark}  [{v.seconds:.0f} s] {'; '.join(v.detail)}"
+          f"  ({v.info})", flush=True)

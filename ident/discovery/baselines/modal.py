@@ -1,0 +1,387 @@
+"""A modal model fitted to the data: the baseline when no physical model is given.
+
+Receptances of every response's displacement (relative to the frame when the frame is shaken) per
+excitation, with common poles:
+
+    z_i(s) = sum_r [ C_ir / (s - lambda_r) + conj ] U(s)
+
+Poles start from vector fitting of the measured frequency response (Gustavsen & Semlyen 1999: poles
+relocated as the zeros of a weighting function) and are then refined on the simulation error in the
+time domain, the residues C solved by linear least squares inside (variable projection, Golub & Pereyra
+1973): the Hann-windowed H1 estimate biases damping, the time domain does not. The order is the lowest
+after which two more modes no longer cut that error by 10 %. Every response is compared in its own kind
+(displacement, velocity, acceleration), each with its own initial modal state (free response) so a
+record need not start at rest.
+
+A force at a location enters mode r with gain lz_r / C_dr when the driving point d is known
+(reciprocity; the coefficient then has the force's units) and otherwise with lz_r 2 i omega_r kappa_r,
+kappa_r = 1 / b_r^2 unknown per mode (b_r the excitation's participation in mode r; real for real modes,
+complex under a voltage-driven shaker), so the search fits one coefficient per mode. Either way the
+coefficient per unit modal mass at the location is theta_r (lz_r 2 i omega_r)^2 kappa_r.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..model import Element, LinearModel, mode_states
+from ..signals import ORDER, Prepared, convert, frf
+from . import Baseline, Location, dominant_mode, element_force
+
+MAX_MODES = 12
+BASIS_MODES = 3  # modes per location whose gains the search fits separately (no driving point)
+
+
+def _design(poles, states, drive, t, order: int) -> np.ndarray:
+    """Real design matrix (n, 4m) of one output of kinematic ``order``: columns for Re C, Im C (forced
+    response, with the feedthrough of the modal input ``drive`` (n, m)) and for the free response."""
+    lam = poles[None, :]
+    forced = lam**order * states
+    if order >= 1:
+        forced = forced + lam ** (order - 1) * drive
+    free = lam**order * np.exp(lam * t[:, None])
+    return np.hstack([2 * forced.real, -2 * forced.imag, 2 * free.real, -2 * free.imag])
+
+
+def _inputs(poles, prep: Prepared, elements: tuple[Element, ...], forces) -> tuple[np.ndarray, np.ndarray]:
+    """Modal states (n, m) and modal inputs (n, m) under the excitation and known element forces."""
+    dt = 1.0 / prep.fs_hz
+    drive = np.repeat(prep.u[:, None].astype(complex), poles.size, axis=1)
+    for el, g in zip(elements, forces):
+        drive = drive - g[:, None] * el.gain[None, :]
+    states = np.zeros((prep.n, poles.size), complex)
+    # states are linear in the drive: the excitation's part, then each force's through its gains
+    states += mode_states(poles, prep.u.astype(complex), dt)
+    for el, g in zip(elements, forces):
+        states -= mode_states(poles, g.astype(complex), dt) * el.gain[None, :]
+    return states, drive
+
+
+def fit_residues(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements: tuple[Element, ...] = (),
+                 forces=()) -> tuple[np.ndarray, np.ndarray]:
+    """Residues C (k, m) for fixed poles by least squares on the measured responses over ``rows``, and the
+    fitted outputs there (len(rows), k). ``forces``: element forces along the record (measured
+    coordinates)."""
+    states, drive = _inputs(poles, prep, elements, forces)
+    states, drive = states[rows], drive[rows]
+    t = rows / prep.fs_hz
+    m = poles.size
+    C = np.empty((len(prep.names), m), complex)
+    fit = np.empty((rows.size, len(prep.names)))
+    for i, kind in enumerate(prep.kinds):
+        X = _design(poles, states, drive, t, ORDER[kind])
+        y = prep.measured[rows, i] - (prep.base[rows, ORDER[kind]] if prep.base_excited else 0.0)
+        sol = np.linalg.lstsq(X, y, rcond=None)[0]
+        C[i] = sol[:m] + 1j * sol[m:2 * m]
+        fit[:, i] = X @ sol + (prep.base[rows, ORDER[kind]] if prep.base_excited else 0.0)
+    return C, fit
+
+
+def _per_response(fit: np.ndarray, meas: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean((fit - meas) ** 2, axis=0)) / np.maximum(meas.std(axis=0), 1e-300)
+
+
+def _nrmse(fit: np.ndarray, meas: np.ndarray) -> float:
+    return float(np.mean(_per_response(fit, meas)))
+
+
+def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(), forces=(),
+                 max_nfev: int = 20, stride: int = 2) -> np.ndarray:
+    """Poles by least squares on the fit error over ``rows`` (every ``stride``-th) with the residues solved
+    inside."""
+    sub = rows[::stride]
+    scale = np.maximum(prep.measured[rows].std(axis=0), 1e-300)
+
+    def unpack(x):
+        m = x.size // 2
+        return -np.exp(x[:m]) + 1j * np.exp(x[m:])
+
+    def resid(x):
+        _, fit = fit_residues(unpack(x), prep, sub, elements, forces)
+        if not np.all(np.isfinite(fit)):
+            return np.full(sub.size * scale.size, 1e3)
+        return ((fit - prep.measured[sub]) / scale).ravel()
+
+    x0 = np.concatenate([np.log(np.maximum(-poles.real, 1e-6)), np.log(poles.imag)])
+    try:
+        x = least_squares(resid, x0, max_nfev=max_nfev, x_scale=0.01, diff_step=1e-5).x
+    except (np.linalg.LinAlgError, ValueError):
+        return poles
+    return unpack(x)
+
+
+def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces: list[np.ndarray],
+                    max_nfev: int = 8) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], float]:
+    """Poles, residues C (k, m) of the excitation and residues D_f (k, m) of each known force, fitted
+    together (variable projection over the poles): nonlinear subspace identification's principle in the
+    time domain, the nonlinear force as an extra input with residues of its own, so the linear part is
+    not the equivalent linearisation of the nonlinear data (Noel & Kerschen, MSSP 2013). Returns the fit's
+    NRMSE on ``rows`` too."""
+    dt = 1.0 / prep.fs_hz
+    st = stride(prep, rows)
+    hb = [convert(h, prep.fs_hz, prep.band, 0, 0) for h in forces]
+    scale = np.maximum(prep.measured[rows].std(axis=0), 1e-300)
+
+    def solve(poles, sub):
+        m = poles.size
+        t = sub / prep.fs_hz
+        ins = [prep.u] + hb
+        states = [mode_states(poles, x.astype(complex), dt)[sub] for x in ins]
+        drives = [np.repeat(x[sub, None].astype(complex), m, axis=1) for x in ins]
+        C = np.empty((len(prep.names), m), complex)
+        D = [np.empty((len(prep.names), m), complex) for _ in hb]
+        fit = np.empty((sub.size, len(prep.names)))
+        for i, kind in enumerate(prep.kinds):
+            o = ORDER[kind]
+            X = [_design(poles, states[0], drives[0], t, o)]
+            X += [_design(poles, sq, dq, t, o)[:, :2 * m] for sq, dq in zip(states[1:], drives[1:])]
+            X = np.hstack(X)
+            y = prep.measured[sub, i] - (prep.base[sub, o] if prep.base_excited else 0.0)
+            if not np.all(np.isfinite(X)):
+                raise ValueError("poles left the stable half-plane")
+            sol = np.linalg.lstsq(X, y, rcond=None)[0]
+            C[i] = sol[:m] + 1j * sol[m:2 * m]
+            for j in range(len(hb)):
+                q = sol[4 * m + 2 * m * j:4 * m + 2 * m * (j + 1)]
+                D[j][i] = q[:m] + 1j * q[m:]
+            fit[:, i] = X @ sol + (prep.base[sub, o] if prep.base_excited else 0.0)
+        return C, D, fit
+
+    def unpack(x):
+        m = x.size // 2
+        return -np.exp(x[:m]) + 1j * np.exp(x[m:])
+
+    sub = rows[::st]
+
+    def resid(x):
+        try:
+            return ((solve(unpack(x), sub)[2] - prep.measured[sub]) / scale).ravel()
+        except ValueError:
+            return np.full(sub.size * scale.size, 1e3)
+
+    x0 = np.concatenate([np.log(np.maximum(-poles0.real, 1e-6)), np.log(poles0.imag)])
+    try:
+        poles = unpack(least_squares(resid, x0, max_nfev=max_nfev, x_scale=0.01, diff_step=1e-5).x)
+    except (np.linalg.LinAlgError, ValueError):
+        poles = np.asarray(poles0, complex)
+    C, D, fit = solve(poles, rows)
+    return poles, C, D, _nrmse(fit, prep.measured[rows])
+
+
+def gains_from_residues(C: np.ndarray, D: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The modal gains g of a force whose responses have residues D (k, m), in a model with residues C:
+    D_ir = -C_ir g_r, by least squares over the responses (each weighted by ``weights``)."""
+    w = np.asarray(weights, float)[:, None] ** 2
+    return -np.sum(w * np.conj(C) * D, axis=0) / np.maximum(np.sum(w * np.abs(C) ** 2, axis=0), 1e-300)
+
+
+def _relocation_basis(s: np.ndarray, poles: np.ndarray) -> np.ndarray:
+    a = poles[None, :]
+    s = s[:, None]
+    out = np.empty((s.shape[0], 2 * poles.size), complex)
+    out[:, 0::2] = 1 / (s - a) + 1 / (s - a.conj())
+    out[:, 1::2] = 1j / (s - a) - 1j / (s - a.conj())
+    return out
+
+
+def vector_fit_poles(f_hz: np.ndarray, H: np.ndarray, n_modes: int, iterations: int = 15) -> np.ndarray:
+    """Common poles (Im > 0) of the frequency responses H (k, nf) by vector fitting."""
+    s = 2j * np.pi * f_hz
+    k, nf = H.shape
+    w = 1.0 / np.sqrt(np.mean(np.abs(H) ** 2, axis=1, keepdims=True) + 1e-300)
+    beta = 2 * np.pi * np.linspace(f_hz.min(), f_hz.max(), n_modes + 2)[1:-1]
+    poles = -0.01 * beta + 1j * beta
+    m2 = 2 * n_modes
+    for _ in range(iterations):
+        Phi = _relocation_basis(s, poles)
+        A = np.zeros((k * nf, k * m2 + m2), complex)
+        b = np.zeros(k * nf, complex)
+        for i in range(k):
+            A[i * nf:(i + 1) * nf, i * m2:(i + 1) * m2] = Phi * w[i]
+            A[i * nf:(i + 1) * nf, k * m2:] = -(H[i] * w[i])[:, None] * Phi
+            b[i * nf:(i + 1) * nf] = H[i] * w[i]
+        x = np.linalg.lstsq(np.vstack([A.real, A.imag]), np.concatenate([b.real, b.imag]), rcond=None)[0]
+        ct = x[k * m2:]
+        Ar = np.zeros((m2, m2))
+        br = np.zeros(m2)
+        for r, a in enumerate(poles):
+            Ar[2 * r:2 * r + 2, 2 * r:2 * r + 2] = [[a.real, a.imag], [-a.imag, a.real]]
+            br[2 * r] = 2.0
+        eig = np.linalg.eigvals(Ar - np.outer(br, ct))
+        new = eig[eig.imag > 1e-9 * np.abs(eig).max()]
+        new = -np.abs(new.real) + 1j * np.abs(new.imag)
+        if new.size < n_modes:  # lost pairs: put them back spread over the band
+            add = 2 * np.pi * np.linspace(f_hz.min(), f_hz.max(), n_modes - new.size + 2)[1:-1]
+            new = np.concatenate([new, -0.01 * add + 1j * add])
+        poles = np.sort_complex(new[:n_modes])
+    return poles[np.argsort(poles.imag)]
+
+
+def stride(prep: Prepared, rows: np.ndarray, cap: int = 20000) -> int:
+    """Every how many samples the pole refinement looks: eight per period of the band's top, and at most
+    ``cap`` samples (the residues are a linear fit, the poles need the shape of the response, not every
+    sample of it)."""
+    return max(1, int(prep.fs_hz / (8 * prep.band[1])), int(np.ceil(rows.size / cap)))
+
+
+def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
+              poles0: np.ndarray | None = None) -> tuple[LinearModel, float]:
+    """The modal model of the lowest order after which two more modes no longer cut the fit error of any
+    response on ``rows`` by 10 % (and 0.005); returns it with its error (NRMSE, mean over responses). With ``poles0``
+    (a fit of the same data in another band) the order is taken from it and only refined."""
+    st = stride(prep, rows)
+    if poles0 is not None:
+        poles = refine_poles(np.asarray(poles0, complex), prep, rows, max_nfev=30, stride=st)
+        C, fit = fit_residues(poles, prep, rows)
+        m = poles.size
+        return LinearModel(poles, np.ones((1, m), complex), C), _nrmse(fit, prep.measured[rows])
+    f, H, puu = frf(prep.u[rows], prep.zva[0][rows], prep.fs_hz)
+    lo, hi = prep.band
+    keep = (f >= lo) & (f <= hi) & (puu > 1e-3 * puu[(f >= lo) & (f <= hi)].max())
+    if keep.sum() < 8:
+        raise ValueError("the excitation has power on too few frequency lines in the band to fit a modal model")
+    f, H = f[keep], H[:, keep]
+    kept, misses = None, 0
+    for m in range(1, min(max_modes, keep.sum() // 4) + 1):
+        try:
+            poles = vector_fit_poles(f, H, m)
+            poles = refine_poles(poles, prep, rows, max_nfev=12, stride=2 * st)
+            C, fit = fit_residues(poles, prep, rows)
+        except (np.linalg.LinAlgError, ValueError):
+            break
+        each = _per_response(fit, prep.measured[rows])
+        # more modes are kept when they fit any response better: a sensor on a beam whose mode the others
+        # barely see must get its mode too
+        if kept is None or np.any((each < 0.9 * kept[0]) & (kept[0] - each > 0.005)):
+            kept, misses = (each, poles, C), 0
+        else:
+            misses += 1  # a mode can pair up with a neighbour first: look two orders further
+            if misses == 2:
+                break
+    if kept is None:
+        raise ValueError("no modal model could be fitted to the data")
+    err, poles, C = kept
+    poles = refine_poles(poles, prep, rows, max_nfev=30, stride=st)
+    C, fit = fit_residues(poles, prep, rows)
+    m = poles.size
+    return LinearModel(poles, np.ones((1, m), complex), C), _nrmse(fit, prep.measured[rows])
+
+
+class ModalBaseline(Baseline):
+    """A modal model fitted to the data (see the module's docstring)."""
+
+    label = "modal model fitted to the data"
+    causes = ("contact", "cubic_stiffness", "quadratic_stiffness", "coulomb_friction", "quadratic_damping",
+              "hysteretic_joint", "linear_mismatch", "clipping")
+
+    def __init__(self, model: LinearModel, driving_point: int | None, complex_gains: bool = False,
+                 fit_nrmse: float = np.nan):
+        self.model = model
+        self.driving_point = driving_point
+        self.complex_gains = complex_gains
+        self.fit_nrmse = fit_nrmse
+
+    @classmethod
+    def fit(cls, prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
+            poles0: np.ndarray | None = None) -> "ModalBaseline":
+        model, err = fit_model(prep, rows, max_modes, poles0)
+        return cls(model, prep.driving_point if prep.excitation_kind == "force" else None,
+                   prep.excitation_kind == "voltage", err)
+
+    def _omega2i(self) -> np.ndarray:
+        return 2j * self.model.poles.imag
+
+    def _modes(self, lz: np.ndarray) -> np.ndarray:
+        """The location's modes for separate gains: the largest |lz_r| / (zeta_r |lambda_r|), at most
+        ``BASIS_MODES``, each moving the coordinate at least 10 % as much as the first."""
+        p = self.model.poles
+        score = np.abs(lz) / (np.maximum(-p.real / np.abs(p), 1e-4) * np.abs(p))
+        order = np.argsort(score)[::-1]
+        return np.array([r for r in order[:BASIS_MODES] if score[r] >= 0.1 * score[order[0]]], int)
+
+    def gain_basis(self, loc: Location) -> list[np.ndarray]:
+        lz = loc.lz(self.model)
+        m = lz.size
+        if self.driving_point is not None:
+            cd = self.model.C[self.driving_point]
+            ok = np.abs(cd) >= 0.05 * np.abs(cd).max()
+            return [np.where(ok, lz / np.where(ok, cd, 1.0), 0.0)]
+        out = []
+        for r in self._modes(lz):
+            e = np.zeros(m, complex)
+            e[r] = lz[r] * self._omega2i()[r]
+            out.append(e)
+            if self.complex_gains:
+                out.append(1j * e)
+        return out
+
+    def per_mass(self, loc: Location, gain: np.ndarray) -> float:
+        lz = loc.lz(self.model)
+        r = dominant_mode(lz, self.model.poles)
+        x = lz[r] * self._omega2i()[r]
+        if abs(x) == 0:
+            return float("nan")
+        # gain_r = x kappa_r theta  ->  per mass = theta kappa_r x^2 = gain_r x
+        return float(np.real(gain[r] * x))
+
+    def physical(self, loc: Location) -> float | None:
+        if self.driving_point is None:
+            return None
+        lz = loc.lz(self.model)
+        r = dominant_mode(lz, self.model.poles)
+        cd = self.model.C[self.driving_point, r]
+        inv = float(np.real(lz[r] ** 2 * self._omega2i()[r] / cd)) if cd != 0 else 0.0
+        return 1.0 / inv if inv > 0 else None
+
+    def initial_state(self, prep: Prepared, model: LinearModel, start: int, stop: int) -> np.ndarray:
+        return estimate_state(model, prep, start, stop)
+
+    def fit_jointly(self, prep: Prepared, rows: np.ndarray, loc: Location, forces: list[np.ndarray]):
+        """The linear part fitted again with the forces (unit-coefficient laws on the location's measured
+        coordinate) as extra inputs: the new baseline, each force's modal gains, and the fit's NRMSE."""
+        poles, C, D, err = fit_with_forces(self.model.poles, prep, rows, forces)
+        scale = 1.0 / np.maximum(prep.measured[rows].std(axis=0), 1e-300)
+        m = poles.size
+        new = ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point,
+                            self.complex_gains, err)
+        return new, [gains_from_residues(C, d, scale) for d in D], err
+
+    def refit(self, prep: Prepared, segments, elements: tuple[Element, ...]) -> "ModalBaseline":
+        rows = np.concatenate([np.arange(s.start, s.stop) for s in segments])
+        forces = [element_force(el, prep) for el in elements]
+        try:
+            poles = refine_poles(self.model.poles, prep, rows, elements, forces, max_nfev=10,
+                                 stride=2 * stride(prep, rows))
+            C, fit = fit_residues(poles, prep, rows, elements, forces)
+        except (np.linalg.LinAlgError, ValueError):
+            return self
+        m = poles.size
+        return ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point,
+                             self.complex_gains, _nrmse(fit, prep.measured[rows]))
+
+
+def estimate_state(model: LinearModel, prep: Prepared, start: int, stop: int) -> np.ndarray:
+    """Modal state at ``start`` by least squares on the measured responses over [start, stop): the
+    free response that, added to the forced one from rest, fits them best (linear part only)."""
+    seg = slice(start, stop)
+    poles = model.poles
+    dt = 1.0 / prep.fs_hz
+    u = prep.u[seg]
+    states = mode_states(poles, u.astype(complex), dt)
+    t = np.arange(stop - start) * dt
+    rows, rhs = [], []
+    for i, kind in enumerate(prep.kinds):
+        o = ORDER[kind]
+        lam = poles[None, :]
+        forced = 2 * np.real((model.C[i] * lam**o * states).sum(axis=1))
+        if o >= 1:
+            forced += 2 * np.real((model.C[i] * poles ** (o - 1)).sum()) * u
+        y = prep.measured[seg, i] - forced - (prep.base[seg, o] if prep.base_excited else 0.0)
+        free = model.C[i] * lam**o * np.exp(lam * t[:, None])
+        s = max(float(np.std(prep.measured[:, i])), 1e-300)
+        rows.append(np.hstack([2 * free.real, -2 * free.imag]) / s)
+        rhs.append(y / s)
+    sol = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
+    m = poles.size
+    return sol[:m] + 1j * sol[m:]

@@ -1,0 +1,243 @@
+"""``discover``: the one entry point. Measured data in, a ``Discovery`` out.
+
+    Measurement ──prepare──> Prepared (band, signs, kinematics)
+         │                      │
+         │          baseline: RigBaseline(config) | ModalBaseline.fit(training or fit data)
+         │                      │
+         └── split (interleaved blocks) ── baseline scored per held-out block ── transients left out
+                                │
+         characterise (restoring-force curves per location) ── regress every cause at every location
+                                │
+         refine each cause's best location by simulation ── score on held-out blocks ── select
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..rig import RigParams
+from .baselines import Baseline
+from .baselines.modal import ModalBaseline
+from .baselines.rig import RigBaseline
+from .characterise import characterise
+from .result import Discovery
+from .search import (Candidate, Scoring, Selection, Settings, baseline_residual, block_errors, choose,
+                     clipping_candidates, gain_candidates, offset_findings, paired_p, predict, refine, regress, score, significant)
+from .signals import Measurement, Prepared, modal_band, prepare
+from .split import Split, blocks_reached, given, interleaved, transients
+
+
+PIECE_PERIODS = 5  # periods of the slowest mode per piece of the paired test
+
+
+def _warm(baseline: Baseline, prep: Prepared) -> int:
+    """Samples simulated before a block, nudged towards the measured velocities: three periods of the
+    slowest mode (at least the band-pass's edge)."""
+    f = float(np.min(baseline.model.frequencies_hz))
+    return max(prep.edge, int(3.0 / f * prep.fs_hz))
+
+
+def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None, test: slice | None):
+    """Band from a first fit on the preliminary band, then the baseline fitted again in the modes' band."""
+    src = fit_data or m
+    prep0 = prepare(src)
+    split0 = _split(prep0, None if fit_data else train, None if fit_data else test, 4.0 / prep0.band[0])
+    rows0 = np.arange(prep0.edge, prep0.n - prep0.edge) if fit_data else split0.rows("train")
+    first = ModalBaseline.fit(prep0, rows0)
+    f = first.model.frequencies_hz
+    # structural modes: lightly damped, inside the band the data carry power in
+    light = (first.model.damping_ratios < 0.3) & (f >= prep0.band[0]) & (f <= prep0.band[1])
+    if not np.any(light):
+        raise ValueError("no lightly damped mode in the data: nothing resonates in the band "
+                         f"{prep0.band[0]:.3g}-{prep0.band[1]:.3g} Hz")
+    return modal_band(first.model.frequencies_hz[light], m.fs_hz, min(m.n, src.n)), first.model.poles[light]
+
+
+def _split(prep: Prepared, train: slice | None, test: slice | None, block_s: float) -> Split:
+    if train is not None or test is not None:
+        n = prep.n
+        tr = train or slice(0, int(0.6 * n))
+        te = test or slice(tr.stop, n)
+        return given(n, prep.edge, tr, te)
+    return interleaved(prep.n, prep.edge, max(int(block_s * prep.fs_hz), 16))
+
+
+def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurement | None = None,
+             train: slice | None = None, test: slice | None = None, settings: Settings = Settings()) -> Discovery:
+    """What the baseline (the rig model ``rig``, or a modal model fitted to the data or to ``fit_data``)
+    gets wrong in ``m``, its cause, and the gain of the extended model on held-out blocks."""
+    notes: list[str] = []
+    if rig is not None:
+        baseline: Baseline = RigBaseline(rig)
+        band = modal_band(baseline.model.frequencies_hz, m.fs_hz, m.n)
+        prep = prepare(m, band)
+    else:
+        band, poles0 = _fit_modal(m, fit_data, train, test)
+        prep = prepare(m, band)
+    f_min = float(prep.band[0]) / 0.4
+    split = _split(prep, train, test, 4.0 / f_min)
+    if rig is None:
+        if fit_data is not None:
+            prep_fit = prepare(fit_data, band)
+            baseline = ModalBaseline.fit(prep_fit, np.arange(prep_fit.edge, prep_fit.n - prep_fit.edge),
+                                         poles0=poles0)
+        else:
+            baseline = ModalBaseline.fit(prep, split.rows("train"), poles0=poles0)
+    warm = _warm(baseline, prep)
+    test_rows = split.rows("test")
+    scale = np.maximum(prep.measured[test_rows].std(axis=0), 1e-300)
+    bound = 50.0 * float(np.max(np.abs(prep.zva[0]))) + 1e-300
+
+    # unmodelled transients: isolated bursts of the baseline's error
+    resid_all = np.full((prep.n, len(prep.names)), np.nan)
+    for seg in split.blocks:
+        resid_all[seg] = prep.measured[seg] - predict(baseline, baseline.model, prep, seg, warm)
+    period = max(4, int(prep.fs_hz / f_min))
+    rows = np.concatenate([np.arange(s.start, s.stop) for s in split.blocks])
+    # a blow's transient dies out within five time constants of the least damped mode (at most 10 s)
+    decay = 1.0 / np.maximum(-baseline.model.poles.real, 1e-9)
+    settle = max(warm, int(min(5 * float(decay.max()), 10.0) * prep.fs_hz))
+    onsets = [int(rows[0] + t) for t in transients(np.nan_to_num(resid_all[rows]), period, settle)]
+    if onsets:
+        hit = blocks_reached(split, onsets, settle)
+        if len(hit) <= len(split.blocks) // 5:
+            split = split.without(hit)
+            notes.append(f"left out blocks {hit}: transients the measured input cannot produce at "
+                         + ", ".join(f"{t / prep.fs_hz:.2f} s" for t in onsets))
+        else:  # bursts all over the record are the structure's own behaviour (impacts), not blows
+            onsets = []
+    test_rows = split.rows("test")
+    scale = np.maximum(prep.measured[test_rows].std(axis=0), 1e-300)
+    piece = max(16, int(PIECE_PERIODS * prep.fs_hz / f_min))
+    e0, n0 = block_errors(baseline, baseline.model, prep, split.test, warm, scale, (), bound, piece)
+    sc = Scoring(scale, e0, n0, warm, bound, piece)
+
+    residual = baseline_residual(baseline, prep, split, warm)
+    train_rows = split.rows("train")
+    train_rows = train_rows[np.all(np.isfinite(residual[train_rows]), axis=1)]
+    resid_rms = {n: float(np.sqrt(np.mean(residual[train_rows, i] ** 2))) for i, n in enumerate(prep.names)}
+    locations = baseline.locations(prep)
+    char = characterise(baseline, prep, train_rows, residual, locations, scale)
+    ranked = sorted(locations, key=lambda loc: -char[loc.name]["explained"])[:settings.max_locations]
+
+    # regression of every cause at every location
+    cands: list[Candidate] = []
+    for loc in ranked:
+        for cause in baseline.causes:
+            if cause in ("clipping", "sensor_gain", "sensor_offset"):
+                continue
+            try:
+                c = regress(baseline, prep, train_rows, residual, loc, cause, scale)
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+                notes.append(f"{cause} at {loc.name}: regression failed ({exc})")
+                continue
+            if c is not None:
+                cands.append(c)
+    # a fitted baseline absorbed part of any nonlinearity: the best regressions are fitted again together
+    # with its linear part (their shapes searched again), the rest keep the baseline's
+    if hasattr(baseline, "fit_jointly"):
+        order = sorted(range(len(cands)), key=lambda i: -cands[i].fit_r2)[:settings.max_joint]
+        for i in order:
+            loc = next(loc for loc in ranked if loc.name == cands[i].location)
+            try:
+                again = regress(baseline, prep, train_rows, residual, loc, cands[i].cause, scale, joint_shapes=3)
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+                notes.append(f"{cands[i].label}: joint fit failed ({exc})")
+                continue
+            if again is not None:
+                cands.append(again)
+    raw = np.column_stack([prep.signs[i] * np.asarray(ch.values, float) for i, ch in enumerate(m.responses)])
+    cands += clipping_candidates(prep, raw)
+    if "sensor_gain" in baseline.causes:
+        cands += gain_candidates(baseline, prep, split, warm)
+
+    # refine each cause's best location (by the regression), then score everything on held-out blocks
+    by_loc = {loc.name: loc for loc in locations}
+    leaders: dict[str, Candidate] = {}
+    for c in cands:
+        rank = (c.fit_r2, c.baseline is not None)  # a jointly fitted version before its plain twin
+        if c.elements and (c.cause not in leaders or rank > (leaders[c.cause].fit_r2, leaders[c.cause].baseline is not None)):
+            leaders[c.cause] = c
+    refined = []
+    for c in sorted(leaders.values(), key=lambda c: -c.fit_r2)[:settings.max_refined]:
+        if c.fit_r2 <= 0.01:
+            continue
+        try:
+            refined.append(refine(c, baseline, by_loc[c.location], prep, split, warm, scale, bound, settings))
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+            notes.append(f"{c.label}: refinement failed ({exc})")
+    scored = [score(c, baseline, prep, split, sc) for c in cands + refined]
+    scored.sort(key=lambda c: -c.gain if np.isfinite(c.gain) else np.inf)
+    for c in scored:
+        if c.note.startswith("failed"):
+            notes.append(f"{c.label}: {c.note}")
+
+    # fit data: a cause must hold at the other level too (not spoil the baseline's fit there)
+    if fit_data is not None:
+        scored = _hold_at_fit_level(scored, baseline, prep_fit, warm, f_min, settings)
+
+    sel = _select(scored, baseline, prep, split, sc, settings)
+    ext_model, ext_out, ext_err, ext_blocks = baseline.model, (), n0, e0
+    if sel.findings:
+        own = sel.findings[0].baseline or baseline
+        elements = tuple(el for f in sel.findings for el in f.elements)
+        ext_out = tuple(o for f in sel.findings for o in f.output)
+        ext_model = own.model.with_elements(elements)
+        ext_blocks, ext_err = block_errors(own, ext_model, prep, split.test, warm, scale, ext_out, bound, piece)
+    if "sensor_offset" in baseline.causes:
+        offsets = offset_findings(prep, raw, split, piece, settings)
+        sel = Selection(sel.findings + offsets, sel.ambiguous + [[] for _ in offsets],
+                        [] if offsets and not sel.findings else sel.reasons)
+    notes = sel.reasons + notes
+    return Discovery(baseline, n0, e0, ext_model, ext_out, ext_err, ext_blocks, sel.findings, sel.ambiguous, scored,
+                     split, prep, warm, [t / prep.fs_hz for t in onsets], resid_rms, char, notes)
+
+
+def _hold_at_fit_level(cands: list[Candidate], baseline: Baseline, prep_fit: Prepared, warm: int, f_min: float,
+                       settings: Settings) -> list[Candidate]:
+    """With a separate record for the baseline (a low level): a cause must hold there too. A candidate
+    the baseline predicts significantly better on that record's held-out blocks is not significant: an
+    amplitude-dependent cause explains the high level without breaking the low one, an
+    equivalent-linear change does not."""
+    split_f = _split(prep_fit, None, None, 4.0 / f_min)
+    scale_f = np.maximum(prep_fit.measured[split_f.rows("test")].std(axis=0), 1e-300)
+    piece = max(16, int(PIECE_PERIODS * prep_fit.fs_hz / f_min))
+    e0f, _ = block_errors(baseline, baseline.model, prep_fit, split_f.test, warm, scale_f, (), np.inf, piece)
+    out = []
+    for c in cands:
+        if significant(c, settings):
+            own = c.baseline or baseline
+            ef, _ = block_errors(own, own.model.with_elements(c.elements), prep_fit, split_f.test, warm, scale_f,
+                                 c.output, np.inf, piece)
+            if paired_p(ef, e0f) < settings.alpha:
+                c = replace(c, p_value=1.0, note="breaks the baseline's record: predicted significantly worse there")
+        out.append(c)
+    return out
+
+
+def _select(scored: list[Candidate], baseline: Baseline, prep: Prepared, split: Split, sc: Scoring,
+            settings: Settings) -> Selection:
+    first, alike, why = choose(scored, settings)
+    if first is None:
+        return Selection([], [], [why])
+    findings, ambiguous = [first], [alike]
+    # a second finding: another cause at another location adding a significant gain on top of the first
+    own = first.baseline or baseline
+    taken = {first.label} | {a.label for a in alike}
+    rest = [c for c in scored if c.label not in taken and significant(c, settings) and c.elements
+            and c.location != first.location][:4]
+    best2 = None
+    for c in rest:
+        model = own.model.with_elements(first.elements + c.elements)
+        errs, nrmse = block_errors(own, model, prep, split.test, sc.warm, sc.scale, first.output + c.output,
+                                   sc.bound, sc.piece)
+        p = paired_p(first.block_errors, errs)
+        gain = 1.0 - nrmse / first.test_nrmse if np.isfinite(nrmse) else -np.inf
+        if p < settings.alpha and gain > settings.gain_floor and (best2 is None or gain > best2[0]):
+            best2 = (gain, c)
+    if best2 is not None:
+        findings.append(best2[1])
+        ambiguous.append([])
+    return Selection(findings, ambiguous, [])

@@ -1,0 +1,117 @@
+"""What discovery returns, and its one JSON form."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .baselines import Baseline
+from .catalogue import CAUSES
+from .model import LinearModel
+from .search import Candidate
+from .signals import Prepared
+from .split import Split
+
+
+@dataclass(frozen=True)
+class Discovery:
+    baseline: Baseline
+    baseline_test_nrmse: float
+    baseline_block_errors: np.ndarray
+    extended: LinearModel
+    extended_output: tuple
+    extended_test_nrmse: float
+    extended_block_errors: np.ndarray
+    findings: list[Candidate]
+    ambiguous: list[list[Candidate]]  # per finding, the causes the data cannot separate from it
+    candidates: list[Candidate]  # every candidate scored, best gain first
+    split: Split
+    prep: Prepared
+    warm: int
+    transients_s: list[float] = field(default_factory=list)
+    residual_rms: dict = field(default_factory=dict)
+    characterisation: dict = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def gain(self) -> float:
+        if not self.findings or not self.baseline_test_nrmse > 0:
+            return 0.0
+        return 1.0 - self.extended_test_nrmse / self.baseline_test_nrmse
+
+    @property
+    def gain_vs_zero(self) -> float:
+        """1 - NRMSE of the extended model: predicting zero scores 0, a model worse than zero below it."""
+        return 1.0 - self.extended_test_nrmse
+
+    def verdict(self) -> str:
+        """One line: what was found, or that nothing was, or which causes the data cannot separate."""
+        if not self.findings:
+            return "nothing found: " + (self.notes[0] if self.notes else "no cause beats the baseline")
+        parts = []
+        for f, alike in zip(self.findings, self.ambiguous):
+            if alike:
+                names = " or ".join([f.label] + [a.label for a in alike[:2]])
+                parts.append(f"ambiguous: {names} ({CAUSES[f.cause].separates_by})")
+            else:
+                parts.append(f"found {f.label} (held-out gain {f.gain:.2f}, p = {f.p_value:.1g})")
+        return "; ".join(parts)
+
+
+def _clean(v):
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        return v if math.isfinite(v) else None
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_clean(x) for x in v]
+    return v
+
+
+def equation(c: Candidate) -> str:
+    text = ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in c.parameters.items())
+    return f"{c.location}: {c.cause} ({text})"
+
+
+def candidate_json(c: Candidate, fs_hz: float | None = None) -> dict:
+    cause = CAUSES[c.cause]
+    units = {p.name: p.unit for p in cause.coefficients + cause.shape}
+    return _clean({"effect": c.cause, "response": c.location, "parameters": c.parameters, "units": units,
+                   "physical": c.physical, "gain": c.gain, "test_nrmse": c.test_nrmse, "p_value": c.p_value,
+                   "fit_r2": c.fit_r2, "refined": c.refined, "note": c.note or None})
+
+
+def to_json(d: Discovery) -> dict:
+    """The result in the shape the README documents (``baseline``, ``extended``, ``gain``, ``findings``,
+    ``candidates``, ``split``, ``residual_rms``), with what this design adds beside it."""
+    prep = d.prep
+    model = d.baseline.model
+    out = {
+        "verdict": d.verdict(),
+        "baseline": {"kind": d.baseline.label, "test_nrmse": d.baseline_test_nrmse,
+                     "modes": [{"frequency_hz": float(f), "damping_ratio": float(z)}
+                               for f, z in zip(model.frequencies_hz, model.damping_ratios)]},
+        "extended": {"test_nrmse": d.extended_test_nrmse, "equations": [equation(c) for c in d.findings]},
+        "gain": d.gain,
+        "gain_vs_zero": d.gain_vs_zero,
+        "findings": [{**candidate_json(c), "ambiguous_with": [candidate_json(a) for a in alike]}
+                     for c, alike in zip(d.findings, d.ambiguous)],
+        "candidates": [candidate_json(c) for c in d.candidates],
+        "split": {"blocks": [[s.start, s.stop] for s in d.split.blocks],
+                  "held_out": list(d.split.held_out), "excluded": list(d.split.excluded),
+                  "train": [[s.start, s.stop] for s in d.split.train],
+                  "test": [[s.start, s.stop] for s in d.split.test]},
+        "band_hz": list(prep.band),
+        "signs": {n: int(s) for n, s in zip(prep.names, prep.signs)},
+        "sign_notes": prep.sign_notes,
+        "transients_s": d.transients_s,
+        "residual_rms": d.residual_rms,
+        "characterisation": d.characterisation,
+        "notes": d.notes,
+    }
+    return _clean(out)

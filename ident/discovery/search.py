@@ -1,0 +1,515 @@
+"""The search: fit every cause at every location, refine the leaders by simulation, score on held-out
+blocks, and select honestly.
+
+1. Predictions. Every held-out block is simulated from the state the baseline reads off the data just
+   before it (``predict``), band-passed like the measurement; its NRMSE is one sample of the paired test.
+2. Regression. The residual (measured minus the baseline simulated over the whole record) is regressed
+   on the linear responses to each cause's force shape evaluated on the measured coordinate of each
+   location (Kaheman et al. 2019 learn such discrepancies in physical coordinates; Noel & Kerschen's
+   nonlinear subspace method treats the nonlinear force as an extra input the same way). A shape with
+   nonlinear parameters (a gap, a side, a slip displacement) is searched on a grid.
+3. Refinement. The regression is biased (displacement integrated from noisy accelerations, a linear part
+   that absorbed some of the effect), so each cause's best location is refined by simulation error on
+   training blocks (``refine``): coefficients scaled, a gap scanned and polished, and a fitted baseline
+   refitted jointly with the cause in place.
+4. Selection (``select``). A cause is a finding only if a one-sided paired t-test over held-out blocks
+   says it beats the baseline (p < ``alpha``), its gain exceeds ``gain_floor``, it predicts better than
+   zero, and it beats every simpler significant cause the same way; a cause the data cannot tell from
+   another (no significant difference either way) is reported as ambiguous, with the test that would
+   separate them. A second finding must add a significant gain on top of the first.
+Numerical failures (an optimiser or linear algebra that does not converge) make a failed candidate
+with its reason, never a crash.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.optimize import minimize
+from scipy.stats import t as student_t
+
+from .baselines import Baseline, Location
+from .catalogue import CAUSES, CONTACT, JOINT, SIDES, force_series, law_parameters, shapes
+from .model import Element, LinearModel, force_response, nudging_gain, simulate, substeps_for
+from .signals import ORDER, Prepared, convert
+from .split import Split
+
+
+PENALTY = 1e9  # the refinement's objective where a simulation diverges or a parameter leaves its range
+NUDGE_RATE = 0.3  # relaxation rate of the warm-up towards measured velocities, per rad/s of the slowest mode
+
+
+@dataclass(frozen=True)
+class Settings:
+    alpha: float = 0.05  # significance of the paired tests
+    gain_floor: float = 0.03  # a finding must cut the held-out error by at least this share
+    refine_evals: int = 60  # simulations per refinement
+    refine_blocks: int = 6  # training blocks a refinement simulates (the busiest at the location)
+    max_locations: int = 6  # locations searched in full (ranked by how much of the residual they explain)
+    max_refined: int = 4  # causes refined by simulation (each at its best location, best regressions first)
+    max_joint: int = 6  # with a fitted baseline: the best regressions fitted again jointly with the linear part
+
+
+@dataclass(frozen=True)
+class Candidate:
+    cause: str
+    location: str
+    parameters: dict  # the catalogue's, per unit modal mass at the location
+    elements: tuple[Element, ...] = ()
+    output: tuple = ()  # sensor causes: ((response index, "gain" | "clip", value),)
+    physical: dict = field(default_factory=dict)  # in newtons when the baseline knows the mass
+    fit_r2: float = float("nan")  # share of the training residual the regression explains
+    train_nrmse: float = float("nan")
+    block_errors: np.ndarray | None = None
+    test_nrmse: float = float("nan")
+    gain: float = float("nan")  # 1 - test NRMSE / baseline test NRMSE
+    p_value: float = float("nan")  # paired test against the baseline
+    refined: bool = False
+    baseline: Baseline | None = None  # its own linear part when refitted jointly
+    note: str = ""
+
+    @property
+    def order(self) -> int:
+        return CAUSES[self.cause].order
+
+    @property
+    def label(self) -> str:
+        return f"{self.cause} at {self.location}"
+
+
+def outputs_of(prep: Prepared) -> list[tuple[int, int]]:
+    return [(i, ORDER[k]) for i, k in enumerate(prep.kinds)]
+
+
+def bandpass(prep: Prepared, y: np.ndarray) -> np.ndarray:
+    """Predictions band-passed like the measured responses (each in its own kind)."""
+    return convert(y, prep.fs_hz, prep.band, 0, 0)
+
+
+def predict(baseline: Baseline, model: LinearModel, prep: Prepared, seg: slice, warm: int,
+            output: tuple = (), bound: float = np.inf) -> np.ndarray:
+    """The responses over ``seg`` (each in its measured kind, absolute, band-passed) of ``model`` started
+    ``warm`` samples earlier from the state ``baseline`` reads off the data there, and nudged towards the
+    measured velocities until the segment starts (``model.simulate``); the segment itself is free-run."""
+    s = max(0, seg.start - warm)
+    w0, nudge = None, None  # at rest where the record starts
+    if seg.start > s:
+        w0 = baseline.initial_state(prep, model, s, seg.start)
+        rate = float(np.min(np.abs(model.poles))) * NUDGE_RATE
+        Co, K = nudging_gain(model, rate)
+        observed = prep.zva[1][s:seg.start + 1].copy()
+        for i, kind, value in output:  # a sensor reading high: the structure moved less than it says
+            if kind == "gain":
+                observed[:, i] /= 1.0 + value
+        nudge = (observed, Co, K)
+    zmax = float(np.max(np.abs(prep.zva[0][s:seg.stop]))) if prep.n else 0.0
+    vmax = float(np.max(np.abs(prep.zva[1][s:seg.stop]))) if prep.n else 0.0
+    sub = substeps_for(model, prep.fs_hz, 2 * zmax, 2 * vmax)
+    y = simulate(model, prep.drive[s:seg.stop], prep.fs_hz, outputs_of(prep), w0, sub, bound, nudge)
+    if not np.all(np.isfinite(y)):
+        return np.full((seg.stop - seg.start, y.shape[1]), np.nan)
+    y = bandpass(prep, y)
+    if prep.base_excited:  # the frame's own motion in each response's kind (already band-passed)
+        y = y + prep.base[s:seg.stop][:, [ORDER[k] for k in prep.kinds]]
+    for i, kind, value in output:
+        if kind == "gain":
+            y[:, i] *= 1.0 + value
+        elif kind == "clip":
+            y[:, i] = np.clip(y[:, i], -value, value)
+    return y[seg.start - s:]
+
+
+@dataclass(frozen=True)
+class Scoring:
+    """What every candidate is scored against: the baseline's errors per held-out block."""
+
+    scale: np.ndarray  # (k,) std of each measured response over the held-out blocks
+    block_errors: np.ndarray  # (pieces,)
+    test_nrmse: float
+    warm: int
+    bound: float
+    piece: int  # samples per piece of the paired test
+
+
+def block_errors(baseline: Baseline, model: LinearModel, prep: Prepared, segs, warm: int, scale: np.ndarray,
+                 output: tuple = (), bound: float = np.inf, piece: int = 0) -> tuple[np.ndarray, float]:
+    """NRMSE per piece (mean over responses of RMS error / the response's held-out std) and over all
+    blocks together; inf where a simulation diverged. Each block is simulated once; with ``piece`` > 0
+    its error is counted in pieces of that many samples (an effect that acts in a few blocks, a contact
+    met only near a sweep's resonance, then shows in many samples of the paired test)."""
+    errs, sq, count = [], np.zeros(scale.size), 0
+    for seg in segs:
+        y = predict(baseline, model, prep, seg, warm, output, bound)
+        if not np.all(np.isfinite(y)):
+            n_pieces = sum(max(1, (s.stop - s.start) // piece) if piece else 1 for s in segs)
+            return np.full(n_pieces, np.inf), np.inf
+        d = y - prep.measured[seg]
+        k = max(1, d.shape[0] // piece) if piece else 1
+        for part in np.array_split(d, k):
+            errs.append(float(np.mean(np.sqrt(np.mean(part**2, axis=0)) / scale)))
+        sq += np.sum(d**2, axis=0)
+        count += d.shape[0]
+    return np.array(errs), float(np.mean(np.sqrt(sq / max(count, 1)) / scale))
+
+
+def paired_p(a: np.ndarray, b: np.ndarray) -> float:
+    """One-sided p-value that errors ``b`` are smaller than ``a`` (paired t-test over blocks)."""
+    d = np.asarray(a, float) - np.asarray(b, float)
+    if not np.all(np.isfinite(d)):
+        return 1.0 if not np.all(np.isfinite(b)) else 0.0
+    n = d.size
+    sd = float(np.std(d, ddof=1)) if n > 1 else 0.0
+    if sd == 0:
+        return 0.0 if d.mean() > 0 else 1.0
+    return float(student_t.sf(d.mean() / (sd / np.sqrt(n)), n - 1))
+
+
+def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Scoring) -> Candidate:
+    """Held-out errors of a candidate, its gain and its paired test against the baseline."""
+    own = c.baseline or baseline
+    model = own.model.with_elements(c.elements)
+    try:
+        errs, nrmse = block_errors(own, model, prep, split.test, sc.warm, sc.scale, c.output, sc.bound, sc.piece)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError, ZeroDivisionError) as exc:
+        return replace(c, block_errors=np.full(sc.block_errors.size, np.inf), test_nrmse=np.inf, gain=-np.inf,
+                       p_value=1.0, note=f"failed: {exc}")
+    gain = 1.0 - nrmse / sc.test_nrmse if np.isfinite(nrmse) and sc.test_nrmse > 0 else -np.inf
+    return replace(c, block_errors=errs, test_nrmse=nrmse, gain=gain, p_value=paired_p(sc.block_errors, errs))
+
+
+# --- regression ---------------------------------------------------------------------------------------
+
+
+def linear_part(model: LinearModel) -> LinearModel:
+    return LinearModel(model.poles, model.B, model.C)
+
+
+def force_responses(model: LinearModel, prep: Prepared, h: np.ndarray, gains: list[np.ndarray]) -> np.ndarray:
+    """Band-passed responses (n, k, len(gains)) of the linear part to the force series h entering with
+    each gain vector (the force band-passed first: for a linear model that is the same)."""
+    hb = bandpass(prep, h[:, None])[:, 0]
+    return force_response(model, hb, gains, outputs_of(prep), prep.fs_hz)
+
+
+def baseline_residual(baseline: Baseline, prep: Prepared, split: Split, warm: int) -> np.ndarray:
+    """Measured minus the baseline over the record (band-passed): simulated once from the state at the
+    first training block when the baseline is linear, block by block when it has elements of its own."""
+    res = np.full((prep.n, len(prep.names)), np.nan)
+    model = baseline.model
+    if model.elements:
+        for seg in split.train:
+            res[seg] = prep.measured[seg] - predict(baseline, model, prep, seg, warm)
+        return res
+    start = min(s.start for s in split.blocks)
+    seg = slice(start, prep.n)
+    y = predict(baseline, model, prep, seg, warm)
+    res[seg] = prep.measured[seg] - y
+    return res
+
+
+def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.ndarray, loc: Location,
+            cause_name: str, scale: np.ndarray, joint_shapes: int = 0) -> Candidate | None:
+    """The cause at the location by least squares on the residual, the best shape on its grid. A
+    baseline fitted to the data (``fit_jointly``) is then fitted again together with the force of each
+    of the ``joint_shapes`` best shapes (its linear part had absorbed part of the effect), and the shape
+    whose joint fit is best wins; the candidate carries that linear part as its own baseline."""
+    cause = CAUSES[cause_name]
+    model = baseline.model
+    z, v = loc.coordinate(prep)
+    gains = baseline.gain_basis(loc)
+    if not gains:
+        return None
+    target = (residual[rows] / scale).ravel()
+    tt = float(target @ target)
+    if tt <= 0:
+        return None
+    lz = loc.lz(model)
+    found = []
+    for shp, cols in shapes(cause, z, v):
+        X = np.concatenate([force_responses(model, prep, cols[:, c], gains)[rows] / scale[None, :, None]
+                            for c in range(cols.shape[1])], axis=2).reshape(rows.size * scale.size, -1)
+        try:
+            theta, *_ = np.linalg.lstsq(X, target, rcond=None)
+        except np.linalg.LinAlgError:
+            continue
+        r2 = 1.0 - float(np.sum((target - X @ theta) ** 2)) / tt
+        elements = []
+        for c in range(cols.shape[1]):
+            th = theta[c * len(gains):(c + 1) * len(gains)]
+            gain = sum(t_ * g for t_, g in zip(th, gains))
+            elements.append(Element(cause.code, law_parameters(cause, shp, c), lz, gain, loc.weights))
+        per_mass = [baseline.per_mass(loc, el.gain) for el in elements]
+        if cause.positive and not all(pm > 0 for pm in per_mass):
+            continue
+        found.append((r2, shp, cols, tuple(elements), per_mass))
+    if not found:
+        return None
+    found.sort(key=lambda f: -f[0])
+    r2, shp, cols, elements, per_mass = found[0]
+    best = Candidate(cause_name, loc.name, _parameters(cause_name, shp, per_mass), elements,
+                     physical=_physical(baseline, loc, cause_name, shp, elements), fit_r2=r2)
+    if not joint_shapes or not hasattr(baseline, "fit_jointly"):
+        return best
+    best_err = None
+    for r2, shp, cols, _, _ in found[:joint_shapes]:
+        try:
+            own, jg, err = baseline.fit_jointly(prep, rows, loc, [cols[:, c] for c in range(cols.shape[1])])
+        except (np.linalg.LinAlgError, ValueError):
+            continue
+        lz2 = loc.lz(own.model)
+        els = tuple(Element(cause.code, law_parameters(cause, shp, c), lz2, g, loc.weights)
+                    for c, g in enumerate(jg))
+        pm = [own.per_mass(loc, el.gain) for el in els]
+        if cause.positive and not all(x > 0 for x in pm):
+            continue
+        if best_err is None or err < best_err:
+            best_err = err
+            best = Candidate(cause_name, loc.name, _parameters(cause_name, shp, pm), els,
+                             physical=_physical(own, loc, cause_name, shp, els), fit_r2=r2, baseline=own)
+    return best
+
+
+def _parameters(cause: str, shp: dict, per_mass: list[float]) -> dict:
+    c = CAUSES[cause]
+    out = {p.name: float(v) for p, v in zip(c.coefficients, per_mass)}
+    for p in c.shape:
+        out[p.name] = shp[p.name] if p.name == "side" else float(shp[p.name])
+    return out
+
+
+PHYSICAL_NAMES = {"contact": ("stiffness_n_per_m",), "cubic_stiffness": ("coefficient_n_per_m3",),
+                  "quadratic_stiffness": ("coefficient_n_per_m2",), "coulomb_friction": ("force_n",),
+                  "quadratic_damping": ("coefficient_n_s2_per_m2",), "hysteretic_joint": ("stiffness_n_per_m",),
+                  "linear_mismatch": ("stiffness_n_per_m", "damping_n_s_per_m")}
+
+
+def _physical(baseline: Baseline, loc: Location, cause: str, shp: dict, elements) -> dict:
+    mass = baseline.physical(loc)
+    if mass is None or cause not in PHYSICAL_NAMES:
+        return {}
+    out = {name: float(baseline.per_mass(loc, el.gain) * mass) for name, el in zip(PHYSICAL_NAMES[cause], elements)}
+    out["modal_mass_kg"] = float(mass)
+    return out
+
+
+def clipping_candidates(prep: Prepared, raw: np.ndarray, share: float = 0.002) -> list[Candidate]:
+    """A response whose samples pile up at its extreme value (``share`` of them or more) was clipped."""
+    out = []
+    for i, name in enumerate(prep.names):
+        x = raw[:, i]
+        top = float(np.max(np.abs(x)))
+        if top > 0 and np.mean(np.abs(x) >= top * (1 - 1e-6)) >= share:
+            out.append(Candidate("clipping", name, {"range": top}, output=((i, "clip", top),)))
+    return out
+
+
+def offset_findings(prep: Prepared, raw: np.ndarray, split: Split, piece: int, settings: Settings) -> list[Candidate]:
+    """Sensor offsets, judged on the record alone: a structure that stays where it is has zero mean
+    acceleration and velocity, so an accelerometer or a velocity sensor whose held-out pieces all read a
+    mean of the same sign (one-sided t-test against zero, p < ``alpha``) worth more than 2 % of its RMS is
+    offset. The band-pass removes an offset from everything else, so it spoils no other finding."""
+    out = []
+    for i, (name, kind) in enumerate(zip(prep.names, prep.kinds)):
+        if kind == "displacement":
+            continue
+        means = np.array([float(np.mean(part)) for seg in split.test
+                          for part in np.array_split(raw[seg, i], max(1, (seg.stop - seg.start) // piece))])
+        o = float(np.mean(raw[split.rows("train"), i]))
+        rms = float(np.sqrt(np.mean(raw[:, i] ** 2)))
+        if means.size < 3 or abs(o) < 0.02 * rms:
+            continue
+        p = paired_p(np.abs(means), np.abs(means - o))
+        if p < settings.alpha:
+            base = float(np.mean(np.abs(means)))
+            out.append(Candidate("sensor_offset", name, {"offset": o}, output=((i, "offset", o),),
+                                 block_errors=np.abs(means - o) / rms, test_nrmse=float(np.mean(np.abs(means - o)))
+                                 / rms, gain=1.0 - float(np.mean(np.abs(means - o))) / base, p_value=p))
+    return out
+
+
+def gain_candidates(baseline: Baseline, prep: Prepared, split: Split, warm: int) -> list[Candidate]:
+    """A sensor reading high or low: the least-squares scale of the baseline's prediction on training."""
+    out = []
+    pred = np.concatenate([predict(baseline, baseline.model, prep, s, warm) for s in split.train])
+    meas = prep.measured[split.rows("train")]
+    for i, name in enumerate(prep.names):
+        p, m = pred[:, i], meas[:, i]
+        g = float(p @ m / max(p @ p, 1e-300)) - 1.0
+        out.append(Candidate("sensor_gain", name, {"gain_error": g}, output=((i, "gain", g),)))
+    return out
+
+
+# --- refinement ---------------------------------------------------------------------------------------
+
+
+def busiest(prep: Prepared, split: Split, loc_weights: np.ndarray, count: int) -> tuple[slice, ...]:
+    """The ``count`` training blocks where the location moves most, the busiest first."""
+    z = prep.zva[0] @ loc_weights
+    segs = split.train
+    energy = [float(np.mean(z[s] ** 2)) for s in segs]
+    return tuple(segs[k] for k in np.argsort(energy)[::-1][:count])
+
+
+def _train_error(baseline: Baseline, c: Candidate, prep: Prepared, segs, warm: int, scale, bound) -> float:
+    own = c.baseline or baseline
+    try:
+        _, e = block_errors(own, own.model.with_elements(c.elements), prep, segs, warm, scale, c.output, bound)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError, ZeroDivisionError):
+        return np.inf
+    return e
+
+
+def _scaled(c: Candidate, baseline: Baseline, loc: Location, x: np.ndarray, shape: dict) -> Candidate:
+    """The candidate with each element's gain scaled by exp(x_e) and the given shape parameters."""
+    cause = CAUSES[c.cause]
+    els = []
+    for e, el in enumerate(c.elements):
+        p = law_parameters(cause, shape, e) if cause.shape else el.p
+        els.append(Element(el.code, p, el.lz, el.gain * float(np.exp(x[e])), el.weights))
+    per_mass = [baseline.per_mass(loc, el.gain) for el in els]
+    shp = {p.name: shape[p.name] for p in cause.shape}
+    return replace(c, elements=tuple(els), parameters=_parameters(c.cause, shp, per_mass),
+                   physical=_physical(baseline, loc, c.cause, shp, els))
+
+
+def joint_refit(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, split: Split, warm: int,
+                scale: np.ndarray, rounds: int = 2) -> Candidate:
+    """A baseline fitted to the data absorbed part of a nonlinearity (a stopper raises the apparent
+    frequency): fit its linear part again with the candidate's force in place (evaluated on the measured
+    coordinate, the principle of nonlinear subspace identification), regress the cause again against the
+    new linear part, and repeat. The candidate then carries its own baseline."""
+    own = baseline
+    for _ in range(rounds):
+        refit = own.refit(prep, split.train, c.elements)
+        if refit is own:
+            break
+        rows = split.rows("train")
+        res = baseline_residual(refit, prep, split, warm)
+        rows = rows[np.all(np.isfinite(res[rows]), axis=1)]
+        again = regress(refit, prep, rows, res, loc, c.cause, scale)
+        if again is None:
+            break
+        own, c = refit, replace(again, baseline=refit)
+    return c
+
+
+def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, split: Split, warm: int,
+           scale: np.ndarray, bound: float, settings: Settings) -> Candidate:
+    """Refine a mechanical candidate by simulation error on the busiest training blocks: a fitted baseline
+    is first refitted jointly with it (``joint_refit``); then its coefficients are scaled (log, within
+    a factor e^2, e^5 for a stopper's or a joint's stiffness); a contact's side, gap and stiffness are
+    scanned first (a stiff stopper's error is a narrow valley in the gap), a joint's slip displacement
+    is scaled too."""
+    if not c.elements:
+        return c
+    if c.baseline is None:
+        c = joint_refit(c, baseline, loc, prep, split, warm, scale)
+    baseline = c.baseline or baseline
+    segs = busiest(prep, split, loc.weights, settings.refine_blocks)
+    cause = CAUSES[c.cause]
+    shape0 = {p.name: c.parameters[p.name] for p in cause.shape}
+    n_el = len(c.elements)
+    base_err = _train_error(baseline, c, prep, segs, warm, scale, bound)
+
+    # how far a coefficient may move (log): a stopper's stiffness is uncertain by orders of magnitude
+    # (displacement integrated from accelerations is smoothed over millisecond contacts), others are not
+    reach = 5.0 if cause.code in (CONTACT, JOINT) else 2.0
+
+    def run(x, shape):
+        if np.max(np.abs(x[:n_el])) > reach:
+            return np.inf, None
+        cand = _scaled(c, baseline, loc, x, shape)
+        return _train_error(baseline, cand, prep, segs, warm, scale, bound), cand
+
+    best = (base_err, c)
+    starts = [(shape0, 0.0)]
+    if cause.code == CONTACT:
+        # scan side, gap and stiffness on the two busiest blocks: the regression sees displacement smoothed
+        # by the band, so it finds a soft stopper at a smaller gap; a stiff one at the true gap fits the
+        # simulation as well, and only a scan that tries stiff stoppers finds it
+        gap0 = float(shape0["gap"])
+        w2 = float(np.max(np.abs(baseline.model.poles)) ** 2)
+        k0 = max(c.parameters["stiffness_per_mass"], 1e-300)
+        levels = sorted({0.0} | {float(np.clip(np.log(f * w2 / k0), -reach, reach)) for f in (10.0, 100.0)})
+        scan = []
+        for side in SIDES:
+            for fct in np.linspace(0.6, 1.6, 11):
+                for lk in levels:
+                    shp = {"gap": gap0 * fct, "side": side}
+                    cand = _scaled(c, baseline, loc, np.full(n_el, lk), shp)
+                    scan.append((_train_error(baseline, cand, prep, segs[:2], warm, scale, bound), shp, lk))
+        scan.sort(key=lambda s: s[0])
+        starts = [(shp, lk) for _, shp, lk in scan[:2]]
+    for shp, lk in starts:
+        free = [k for k in ("gap", "slip") if k in shp]
+
+        def err(x, shp=shp, free=free):
+            shape = dict(shp)
+            for k, xi in zip(free, x[n_el:]):
+                if abs(xi) > 0.7:
+                    return np.inf, None
+                shape[k] = shp[k] * float(np.exp(xi))
+            return run(x, shape)
+
+        x0 = np.zeros(n_el + len(free))
+        x0[:n_el] = lk
+        step = np.full(x0.size, 0.05)  # a gap or a slip is known from the scan within a few per cent
+        step[:n_el] = 1.0 if reach > 2 else 0.3
+        simplex = np.vstack([x0, x0 + np.diag(step)])
+        try:
+            res = minimize(lambda x: min(err(x)[0], PENALTY), x0, method="Nelder-Mead",
+                           options={"maxfev": settings.refine_evals // len(starts), "xatol": 1e-3,
+                                    "fatol": 1e-5, "initial_simplex": simplex})
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+            return replace(c, note=f"refinement failed: {exc}")
+        e, cand = err(res.x)
+        if cand is not None and e < best[0]:
+            best = (e, cand)
+    e, cand = best
+    cand = replace(cand, refined=True, train_nrmse=e)
+    return cand
+
+
+# --- selection ----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Selection:
+    findings: list[Candidate]
+    ambiguous: list[list[Candidate]]  # per finding: the look-alikes the data cannot separate from it
+    reasons: list[str]
+
+
+def significant(c: Candidate, settings: Settings) -> bool:
+    return (np.isfinite(c.test_nrmse) and c.test_nrmse < 1.0 and c.gain > settings.gain_floor
+            and c.p_value < settings.alpha)
+
+
+def beats(a: Candidate, b: Candidate, settings: Settings) -> bool:
+    """Does ``a`` predict the held-out blocks significantly better than ``b``?"""
+    return paired_p(b.block_errors, a.block_errors) < settings.alpha
+
+
+def choose(cands: list[Candidate], settings: Settings) -> tuple[Candidate | None, list[Candidate], str]:
+    """The first finding among candidates: the best significant one that beats every simpler
+    significant one (else that simpler one, recursively); the significant others it does not beat are
+    its look-alikes."""
+    sig = sorted([c for c in cands if significant(c, settings)], key=lambda c: -c.gain)
+    if not sig:
+        return None, [], "no cause beats the baseline significantly on held-out blocks"
+    best = sig[0]
+    while True:
+        simpler = [c for c in sig if c.order < best.order and not beats(best, c, settings)]
+        if not simpler:
+            break
+        best = max(simpler, key=lambda c: c.gain)
+    # a look-alike of the same cause at an overlapping location says the same thing
+    alike = [c for c in sig if c is not best and not beats(best, c, settings)
+             and not (c.cause == best.cause and _overlap(c.location, best.location))]
+    return best, alike, ""
+
+
+def _overlap(a: str, b: str) -> bool:
+    split = lambda s: set(s.replace("+", "-").split("-"))  # noqa: E731
+    return bool(split(a) & split(b))

@@ -1,0 +1,326 @@
+"""Measured data as recorded, and what discovery makes of it before any model: the analysis band, sign
+conventions, and every response's displacement, velocity and acceleration.
+
+Any shape a lab records: the excitation a force, a base (frame) acceleration or an amplifier voltage;
+responses displacements, velocities or accelerations in any mix; one sensor or many; a 1 s hammer hit or
+hours of shaking. Nothing is assumed about the band: it comes from where the input and the responses
+carry power (``preliminary_band``) and, once modes are known, from the modes (``modal_band``).
+
+Signs. A response whose sign is opposite to the physics (an accelerometer upside down, a laser's axis
+against the force) is recognised from frequency responses and flipped, and the report says so:
+- under a force, a driving-point response is passive, Re(mobility) >= 0 at every frequency, so its
+  receptance has Im H <= 0 across the band; a response with Im H > 0 across the band is a driving
+  point read with the opposite sign (Ewins, "Modal Testing", 2000, sec. 2.5);
+- under a shaken frame, a tip moving in its first mode has absolute acceleration a_b (1 - i / (2 zeta))
+  at resonance, so Im(a_tip / a_b) < 0 at the lowest resonance; > 0 is a flipped sensor.
+Responses that are neither (transfer points) keep their sign; a pair of them is searched both as a
+difference and as a sum, so an interface between two sensors is found whatever their conventions.
+
+Kinematics are converted in the frequency domain on the whole record with one zero-phase band-pass
+(Butterworth magnitudes, high-pass order 2 at the band's low edge, low-pass order 4 at its high edge),
+so displacement, velocity and acceleration of every response are consistent with each other; the first
+and last ``edge`` samples carry the filter's transients and are not analysed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+from scipy.signal import csd, welch
+
+EXCITATIONS = ("force", "base_acceleration", "voltage")
+RESPONSES = ("displacement", "velocity", "acceleration")
+MIN_CYCLES = 5  # the band's low edge holds at least this many periods in the record
+
+
+@dataclass(frozen=True)
+class Channel:
+    name: str
+    kind: str
+    values: np.ndarray
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One record: its sampling rate, the excitation and the responses (all the same length)."""
+
+    fs_hz: float
+    excitation: Channel
+    responses: tuple[Channel, ...]
+
+    def __post_init__(self):
+        if not (np.isfinite(self.fs_hz) and self.fs_hz > 0):
+            raise ValueError(f"sampling rate must be a positive number of Hz, got {self.fs_hz}")
+        if self.excitation.kind not in EXCITATIONS:
+            raise ValueError(f"excitation {self.excitation.name!r}: kind {self.excitation.kind!r} is not one of "
+                             f"{', '.join(EXCITATIONS)}")
+        if not self.responses:
+            raise ValueError("give at least one response")
+        n = len(self.excitation.values)
+        names = [self.excitation.name]
+        for ch in self.responses:
+            if ch.kind not in RESPONSES:
+                raise ValueError(f"response {ch.name!r}: kind {ch.kind!r} is not one of {', '.join(RESPONSES)}")
+            if len(ch.values) != n:
+                raise ValueError(f"response {ch.name!r} has {len(ch.values)} samples, the excitation {n}")
+            names.append(ch.name)
+        if len(set(names)) != len(names):
+            raise ValueError(f"a column is used twice: {names}")
+        for ch in (self.excitation,) + self.responses:
+            x = np.asarray(ch.values, float)
+            if x.ndim != 1:
+                raise ValueError(f"{ch.name!r} must be one column")
+            bad = int(np.count_nonzero(~np.isfinite(x)))
+            if bad:
+                raise ValueError(f"{ch.name!r} holds {bad} NaN or inf samples: repair or cut them first")
+            if np.ptp(x) == 0:
+                raise ValueError(f"{ch.name!r} is constant: nothing to analyse")
+        if n < 256:
+            raise ValueError(f"{n} samples are too few for discovery; give at least 256")
+
+    @property
+    def n(self) -> int:
+        return len(self.excitation.values)
+
+    @property
+    def names(self) -> list[str]:
+        return [c.name for c in self.responses]
+
+    @property
+    def base_excited(self) -> bool:
+        return self.excitation.kind == "base_acceleration"
+
+
+def welch_segment(n: int, fs_hz: float, longest_s: float = 64.0) -> int:
+    """Segment length of Welch estimates: a quarter of the record, a power of two, at most ``longest_s``."""
+    return int(2 ** np.floor(np.log2(max(64, min(n // 4, fs_hz * longest_s)))))
+
+
+def impulsive(u: np.ndarray) -> bool:
+    """Is the excitation a transient (a hammer hit): 90 % of its energy within 5 % of the record?"""
+    e = np.sort(np.asarray(u, float) ** 2)[::-1]
+    k = max(1, int(0.05 * e.size))
+    return bool(e[:k].sum() >= 0.9 * e.sum())
+
+
+def frf(u: np.ndarray, Y: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Frequencies, FRF (k, nf) of responses per input, and the input's spectrum (PSD, or |U|^2 of a
+    transient). H1 (Welch) for a stationary input; for a hammer hit the whole record's spectra, Y / U."""
+    u = np.asarray(u, float)
+    Y = np.asarray(Y, float).reshape(len(u), -1)
+    if impulsive(u):
+        nfft = int(2 ** np.ceil(np.log2(len(u))))
+        U = np.fft.rfft(u - u[: max(1, len(u) // 100)].mean(), nfft)
+        f = np.fft.rfftfreq(nfft, 1 / fs_hz)
+        Yf = np.fft.rfft(Y - Y.mean(axis=0), nfft, axis=0).T
+        puu = np.abs(U) ** 2
+        return f, Yf / np.where(puu > 0, U, np.inf), puu
+    nper = welch_segment(len(u), fs_hz)
+    f, puu = welch(u, fs_hz, nperseg=nper)
+    H = np.array([csd(u, Y[:, i], fs_hz, nperseg=nper)[1] for i in range(Y.shape[1])])
+    return f, H / np.where(puu > 0, puu, np.inf), puu
+
+
+def _percentile_f(f: np.ndarray, p: np.ndarray, q: float) -> float:
+    c = np.cumsum(p)
+    return float(f[min(len(f) - 1, int(np.searchsorted(c, q * c[-1])))])
+
+
+def preliminary_band(m: Measurement) -> tuple[float, float]:
+    """Where the input and the responses carry power: from half the frequency below which 0.5 % of the
+    input's power lies (at least ``MIN_CYCLES`` periods in the record) to the frequency below which 99 %
+    of the responses' power lies above that edge, times 1.5 (room for harmonics), below 0.45 fs."""
+    fs = m.fs_hz
+    u = np.asarray(m.excitation.values, float)
+    nper = welch_segment(m.n, fs)
+    f, pu = welch(u - u.mean(), fs, nperseg=nper)
+    floor = MIN_CYCLES * fs / m.n
+    f_lo = max(0.5 * _percentile_f(f[1:], pu[1:], 0.005), floor, 2 * f[1])
+    py = np.zeros_like(f)
+    for ch in m.responses:
+        y = np.asarray(ch.values, float)
+        p = welch(y - y.mean(), fs, nperseg=nper)[1]
+        py += p / max(p[f >= f_lo].sum(), 1e-300)
+    keep = f >= f_lo
+    f_hi = min(0.45 * fs, 1.5 * _percentile_f(f[keep], py[keep], 0.99))
+    if f_hi <= 1.5 * f_lo:
+        f_hi = min(0.45 * fs, 4 * f_lo)
+    return float(f_lo), float(f_hi)
+
+
+def modal_band(frequencies_hz: np.ndarray, fs_hz: float, n: int, harmonics: float = 4.5) -> tuple[float, float]:
+    """The band a model with these modes explains: from 0.4 x the lowest mode (at least ``MIN_CYCLES``
+    periods in the record) to ``harmonics`` x the highest (the drive's 3rd and 4th harmonics, which a
+    nonlinearity makes, stay in), below 0.45 fs."""
+    f = np.asarray(frequencies_hz, float)
+    lo = max(0.4 * float(f.min()), MIN_CYCLES * fs_hz / n)
+    return lo, min(0.45 * fs_hz, harmonics * float(f.max()))
+
+
+def bandpass_gain(f: np.ndarray, band: tuple[float, float]) -> np.ndarray:
+    """Zero-phase magnitude: Butterworth high-pass order 2 and low-pass order 4, each applied twice (a
+    low edge of 0 is no high-pass)."""
+    lo, hi = band
+    with np.errstate(divide="ignore", over="ignore"):
+        hp = 1.0 / (1.0 + (lo / np.maximum(f, 1e-300)) ** 4) if lo > 0 else np.ones_like(f)
+        lp = 1.0 / (1.0 + (f / hi) ** 8)
+    return hp * lp
+
+
+@lru_cache(maxsize=64)
+def _operator(nfft: int, fs_hz: float, band: tuple[float, float], p: int) -> np.ndarray:
+    """(i 2 pi f)^p times the band's zero-phase gain on the rfft lines of ``nfft`` samples."""
+    f = np.fft.rfftfreq(nfft, 1 / fs_hz)
+    w = 2j * np.pi * f
+    with np.errstate(divide="ignore", invalid="ignore"):
+        op = np.where(f > 0, w ** p if p >= 0 else 1.0 / w ** (-p), 0.0)
+    return op * bandpass_gain(f, band)
+
+
+def convert(x: np.ndarray, fs_hz: float, band: tuple[float, float], from_order: int, to_order: int) -> np.ndarray:
+    """Band-limited conversion along axis 0 between kinematic orders (0 displacement, 1 velocity,
+    2 acceleration): multiply by (i 2 pi f)^(to - from) and the band's zero-phase gain, on the whole
+    record zero-padded to twice its length (the linear trend removed first)."""
+    x = np.asarray(x, float)
+    n = x.shape[0]
+    t = np.arange(n) - (n - 1) / 2
+    x2 = x.reshape(n, -1)
+    slope = (t @ x2) / max(float(t @ t), 1e-300)
+    xd = x2 - np.outer(t, slope) - x2.mean(axis=0)
+    nfft = int(2 ** np.ceil(np.log2(2 * n)))
+    X = np.fft.rfft(xd, nfft, axis=0)
+    X *= _operator(nfft, float(fs_hz), (float(band[0]), float(band[1])), to_order - from_order)[:, None]
+    return np.fft.irfft(X, nfft, axis=0)[:n].reshape(x.shape)
+
+
+def edge_samples(fs_hz: float, band: tuple[float, float]) -> int:
+    """Samples at each end that carry the band-pass's transient: two periods of the low edge."""
+    return int(np.ceil(2.0 * fs_hz / band[0]))
+
+
+ORDER = {"displacement": 0, "velocity": 1, "acceleration": 2}
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """The record ready for models: kinematics per response relative to the frame (absolute under a
+    force), the band, the signs applied and why."""
+
+    fs_hz: float
+    names: list[str]
+    kinds: list[str]
+    u: np.ndarray  # (n,) excitation, band-passed (for linear fits, compared with band-passed responses)
+    drive: np.ndarray  # (n,) excitation as simulations take it: trend removed, anti-alias low-pass only
+    base: np.ndarray  # (n, 3) frame displacement, velocity, acceleration (zeros under a force)
+    zva: np.ndarray  # (3, n, k) relative displacement, velocity, acceleration of every response
+    measured: np.ndarray  # (n, k) each response as measured (its own kind, absolute), band-passed, sign fixed
+    band: tuple[float, float]
+    edge: int
+    signs: np.ndarray  # (k,) +1 as recorded, -1 flipped
+    sign_notes: list[str] = field(default_factory=list)
+    driving_point: int | None = None
+    excitation_kind: str = "force"
+    transient: bool = False  # a hammer-hit record
+
+    @property
+    def n(self) -> int:
+        return self.u.shape[0]
+
+    @property
+    def base_excited(self) -> bool:
+        return self.excitation_kind == "base_acceleration"
+
+
+def _signs(m: Measurement, band: tuple[float, float]) -> tuple[np.ndarray, list[str], int | None]:
+    """Signs to apply to the responses and why (see the module's docstring)."""
+    fs = m.fs_hz
+    u = np.asarray(m.excitation.values, float)
+    Y = np.column_stack([np.asarray(c.values, float) for c in m.responses])
+    f, H, puu = frf(u, Y, fs)
+    inband = (f >= band[0]) & (f <= band[1])
+    sel = inband & (puu > 1e-3 * puu[inband].max())  # lines the input really drives (-30 dB)
+    signs = np.ones(len(m.responses))
+    notes: list[str] = []
+    driving = None
+    if sel.sum() < 4:
+        return signs, ["signs: kept as recorded (too few excited lines to judge)"], None
+    for i, ch in enumerate(m.responses):
+        order = ORDER[ch.kind]
+        if m.base_excited:
+            # absolute response per base acceleration, made an acceleration ratio
+            T = H[i, sel] * (2j * np.pi * f[sel]) ** (2 - order)
+            resp = np.abs(T - 1)
+            peak = _lowest_peak(f[sel], resp)
+            # judged only at a resonance the input sweeps through (a peak with driven lines on both sides,
+            # the relative motion near 90 degrees); a single tone says nothing about the sign
+            if not (0 < peak < resp.size - 1 and abs(np.imag(T[peak] - 1)) > 0.7 * resp[peak]):
+                continue
+            if np.imag(T[peak]) > 0:
+                signs[i] = -1
+                notes.append(f"{ch.name}: flipped (Im of its transmissibility is positive at the lowest "
+                             f"resonance, {f[sel][peak]:.1f} Hz)")
+            continue
+        if m.excitation.kind != "force":
+            continue
+        rec = H[i, sel] / (2j * np.pi * f[sel]) ** order  # receptance
+        w = np.abs(rec) ** 2 * puu[sel]
+        neg = float(np.sum(w * (rec.imag < 0)) / max(np.sum(w), 1e-300))
+        if neg >= 0.9 or neg <= 0.1:
+            if driving is None or abs(neg - 0.5) > abs(driving[1] - 0.5):
+                driving = (i, neg)
+    if driving is not None:
+        i, neg = driving
+        if neg <= 0.1:
+            signs[i] = -1
+            notes.append(f"{m.responses[i].name}: flipped (a driving point read against the force: Im of its "
+                         f"receptance is positive on {100 * (1 - neg):.0f} % of the band's power)")
+        else:
+            notes.append(f"{m.responses[i].name}: the driving point (passive: Im of its receptance negative on "
+                         f"{100 * neg:.0f} % of the band's power)")
+    if not notes:
+        notes.append("signs: kept as recorded")
+    return signs, notes, None if driving is None else driving[0]
+
+
+def _lowest_peak(f: np.ndarray, mag: np.ndarray) -> int:
+    """Index of the lowest-frequency peak that reaches half the largest."""
+    top = float(mag.max())
+    for k in range(1, len(mag) - 1):
+        if mag[k] >= 0.5 * top and mag[k] >= mag[k - 1] and mag[k] >= mag[k + 1]:
+            return k
+    return int(np.argmax(mag))
+
+
+def prepare(m: Measurement, band: tuple[float, float] | None = None) -> Prepared:
+    """Band (given, or ``preliminary_band``), signs, and the kinematics of every response."""
+    fs = m.fs_hz
+    band = band or preliminary_band(m)
+    lo, hi = band
+    if not 0 < lo < hi < fs / 2:
+        raise ValueError(f"analysis band {lo:.3g}-{hi:.3g} Hz does not fit below Nyquist ({fs / 2:.3g} Hz)")
+    edge = edge_samples(fs, band)
+    if m.n < 8 * edge:
+        raise ValueError(f"{m.n} samples hold too few periods of the band's low edge ({lo:.3g} Hz); "
+                         f"give at least {8 * edge} samples or a record with higher frequencies")
+    signs, notes, driving = _signs(m, band)
+    u_raw = np.asarray(m.excitation.values, float)
+    k = len(m.responses)
+    n = m.n
+    base = np.zeros((n, 3))
+    if m.base_excited:
+        for order in range(3):
+            base[:, order] = convert(u_raw, fs, band, 2, order)
+    zva = np.empty((3, n, k))
+    measured = np.empty((n, k))
+    for i, ch in enumerate(m.responses):
+        y = signs[i] * np.asarray(ch.values, float)
+        o = ORDER[ch.kind]
+        measured[:, i] = convert(y, fs, band, o, o)
+        for order in range(3):
+            zva[order, :, i] = convert(y, fs, band, o, order) - base[:, order]
+    u = convert(u_raw, fs, band, 0, 0)
+    drive = convert(u_raw, fs, (0.0, 0.45 * fs), 0, 0)
+    return Prepared(fs, m.names, [c.kind for c in m.responses], u, drive, base, zva, measured, band, edge, signs,
+                    notes, driving, m.excitation.kind, impulsive(u_raw))

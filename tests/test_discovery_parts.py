@@ -1,0 +1,166 @@
+"""The parts of ident.discovery against analytic or independently computed values."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.stats import ttest_rel
+
+from daq.sim.excitation import Excitation
+from daq.sim.rig import RigConfig, simulate_rig
+from ident.discovery import Channel, Measurement
+from ident.discovery.baselines.modal import fit_model
+from ident.discovery.baselines.rig import RigBaseline
+from ident.discovery.catalogue import CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, force_series, law_parameters
+from ident.discovery.model import Element, LinearModel, simulate, substeps_for
+from ident.discovery.search import paired_p
+from ident.discovery.signals import convert, prepare
+from ident.discovery.split import given, interleaved, transients
+from ident.rig import RigParams, simulate_measured_base
+
+
+def _sdof(m=0.5, f0=10.0, zeta=0.02):
+    w = 2 * np.pi * f0
+    wd = w * np.sqrt(1 - zeta**2)
+    lam = -zeta * w + 1j * wd
+    return LinearModel(np.array([lam]), np.array([[1.0 + 0j]]), np.array([[1 / (m * 2j * wd)]])), m, w, zeta
+
+
+def test_integrator_matches_an_independent_duffing_solution_and_converges_at_second_order():
+    lin, m, w, zeta = _sdof()
+    fs, n = 500.0, 4000
+    t = np.arange(n) / fs
+    F = 2.0 * np.sin(2 * np.pi * 9 * t) + np.sin(2 * np.pi * 13.3 * t)
+    k3 = 3e7
+
+    def rhs(tt, x):
+        return [x[1], (np.interp(tt, t, F) - 2 * zeta * w * m * x[1] - m * w * w * x[0] - k3 * x[0] ** 3) / m]
+
+    ref = solve_ivp(rhs, (0, t[-1]), [0, 0], t_eval=t, rtol=1e-10, atol=1e-13, max_step=1 / fs / 4).y[0]
+    p = law_parameters(CAUSES["cubic_stiffness"], {}) * k3
+    model = lin.with_elements((Element(CUBIC, p, lin.C[0], np.array([1.0 + 0j])),))
+    errs = [np.sqrt(np.mean((simulate(model, F, fs, [(0, 0)], substeps=s)[:, 0] - ref) ** 2)) / ref.std()
+            for s in (2, 4, 8)]
+    assert np.std(3e7 * ref**3) > 0.2 * np.std(m * w * w * ref)  # strongly nonlinear
+    assert errs[2] < 1e-3
+    assert 3.5 < errs[0] / errs[1] < 4.5 and 3.5 < errs[1] / errs[2] < 4.5  # second order
+    assert substeps_for(model, fs, np.abs(ref).max(), 1.0) >= 2
+
+
+def test_rig_baseline_runs_the_rig_model_as_ident_rig_does():
+    p = RigParams().with_beams(gap_pos_m=np.inf, gap_neg_m=np.inf)
+    fs = 1000.0
+    t = np.arange(20000) / fs
+    base = 2.0 * np.sin(2 * np.pi * 12.3 * t) + 0.5 * np.sin(2 * np.pi * 7.1 * t)
+    ref = simulate_measured_base(p, base, fs, substeps=8)
+    y = simulate(RigBaseline(p).model, base, fs, [(0, 2), (1, 2)])
+    assert np.max(np.abs(y[:, 0] + base - ref.tip1)) < 1e-9 * np.max(np.abs(ref.tip1))
+    assert np.max(np.abs(y[:, 1] + base - ref.tip2)) < 1e-9 * np.max(np.abs(ref.tip2))
+
+
+def test_contact_pushes_and_never_pulls():
+    p = law_parameters(CAUSES["contact"], {"gap": 1.0, "side": "both"})
+    p[0], p[3] = 100.0, 50.0
+    z = np.array([0.5, 1.2, 1.2, -1.5, 2.0])
+    v = np.array([0.0, 0.0, -10.0, 0.0, 0.0])
+    f = force_series(CONTACT, p, z, v)
+    assert f.tolist() == [0.0, pytest.approx(20.0), 0.0, pytest.approx(-50.0), pytest.approx(100.0)]
+
+
+def test_iwan_joint_dissipates_the_analytic_energy_per_cycle():
+    # N Jenkins elements, stiffness k/N, slip displacements delta (i + 1/2) / N: under z = A sin, each slipping
+    # element dissipates 4 (k/N) delta_i (A - delta_i) per cycle (Iwan 1966)
+    k, delta, A = 1000.0, 1e-3, 0.8e-3
+    p = law_parameters(CAUSES["hysteretic_joint"], {"slip": delta}) * np.array([k, 1, 1, 1])
+    t = np.linspace(0, 3, 30001)
+    z = A * np.sin(2 * np.pi * t)
+    f = force_series(JOINT, p, z, np.gradient(z, t))
+    one = (t >= 1) & (t <= 2)
+    # the element's force is the Iwan force minus its stuck stiffness k z, which encloses no area: the work
+    # the restoring force takes over a cycle is the Iwan loop's
+    area = np.trapezoid(f[one], z[one])
+    d = delta * (np.arange(N_IWAN) + 0.5) / N_IWAN
+    expected = np.sum(4 * (k / N_IWAN) * d * np.clip(A - d, 0, None))
+    assert area == pytest.approx(expected, rel=2e-3)
+
+
+def test_band_limited_conversion_of_a_sine_is_exact_in_the_band():
+    fs = 1000.0
+    t = np.arange(20000) / fs
+    w = 2 * np.pi * 12.0
+    a = np.sin(w * t)
+    z = convert(a, fs, (2.0, 100.0), 2, 0)
+    mid = slice(4000, 16000)
+    gain = (1 / (1 + (2.0 / 12.0) ** 4)) * (1 / (1 + (12.0 / 100.0) ** 8))
+    assert np.max(np.abs(z[mid] - (-a[mid] / w**2) * gain)) < 1e-4 / w**2
+
+
+def test_a_flipped_driving_point_and_a_flipped_tip_are_recognised():
+    # a force-excited oscillator read by a velocity sensor whose axis opposes the force
+    lin, m, w, zeta = _sdof()
+    fs = 400.0
+    rng = np.random.default_rng(0)
+    F = rng.standard_normal(40000)
+    v = simulate(lin, F, fs, [(0, 1)])[:, 0]
+    meas = Measurement(fs, Channel("F", "force", F), (Channel("v", "velocity", -v),))
+    prep = prepare(meas)
+    assert prep.signs.tolist() == [-1] and prep.driving_point == 0
+    # the rig under broadband shaking with tip 2's accelerometer upside down (a single tone cannot tell)
+    cfg = RigConfig(rig=RigParams().with_beams(gap_pos_m=np.inf, gap_neg_m=np.inf),
+                    excitation=Excitation(amplitude_m_per_s2=0.0, noise_rms_m_per_s2=2.0, noise_band_hz=(2.0, 40.0)))
+    _, o = simulate_rig(cfg, 30.0, 1000.0)
+    meas = Measurement(1000.0, Channel("base", "base_acceleration", o.base),
+                       (Channel("tip1", "acceleration", o.tip1), Channel("tip2", "acceleration", -o.tip2)))
+    assert prepare(meas).signs.tolist() == [1, -1]
+
+
+def test_modal_fit_recovers_a_chains_analytic_modes():
+    # three masses in a chain, grounded at both ends: modes known in closed form
+    m, k, c = 1.0, 1e4, 2.0
+    K = k * np.array([[2, -1, 0], [-1, 2, -1], [0, -1, 2]])
+    Mi = np.eye(3) / m
+    A = np.block([[np.zeros((3, 3)), np.eye(3)], [-Mi @ K, -Mi @ (c / k * K)]])
+    lam, V = np.linalg.eig(A)
+    up = lam.imag > 0
+    Vi = np.linalg.inv(V)[up]
+    model = LinearModel(lam[up], (Vi @ np.r_[0, 0, 0, 1 / m, 0, 0])[None, :], V[:3, up])
+    fs = 200.0
+    F = np.random.default_rng(1).standard_normal(60000)
+    acc = simulate(model, F, fs, [(0, 2), (1, 2), (2, 2)])
+    meas = Measurement(fs, Channel("F", "force", F), tuple(Channel(f"x{i + 1}", "acceleration", acc[:, i])
+                                                             for i in range(3)))
+    prep = prepare(meas, (1.0, 60.0))
+    fitted, err = fit_model(prep, np.arange(prep.edge, prep.n - prep.edge))
+    true_f = np.sort(np.abs(lam[up])) / (2 * np.pi)
+    assert fitted.poles.size == 3
+    assert np.allclose(np.sort(fitted.frequencies_hz), true_f, rtol=1e-4)
+    true_z = np.sort(-lam[up].real / np.abs(lam[up]))
+    assert np.allclose(np.sort(fitted.damping_ratios), true_z, rtol=1e-2)
+    assert err < 1e-3
+
+
+def test_paired_test_is_students_on_the_differences():
+    rng = np.random.default_rng(3)
+    a = rng.uniform(0.5, 1.0, 12)
+    b = a - rng.normal(0.05, 0.05, 12)
+    assert paired_p(a, b) == pytest.approx(ttest_rel(a, b, alternative="greater").pvalue, rel=1e-9)
+
+
+def test_splits_hold_out_two_blocks_in_five_and_refuse_overlap():
+    s = interleaved(10000, 100, 200)
+    assert len(s.blocks) == 20 and s.held_out == (2, 4, 7, 9, 12, 14, 17, 19)
+    assert s.rows("train").size + s.rows("test").size == 9800
+    assert not set(s.rows("train")) & set(s.rows("test"))
+    with pytest.raises(ValueError, match="overlap"):
+        given(10000, 100, slice(0, 6000), slice(5000, 10000))
+
+
+def test_a_blow_is_a_transient_and_impacts_that_set_in_are_not():
+    rng = np.random.default_rng(0)
+    e = 0.01 * rng.standard_normal((20000, 1))
+    blow = e.copy()
+    blow[8000:8400, 0] += np.exp(-np.arange(400) / 80.0)
+    onsets = transients(blow, 100, 1000)
+    assert len(onsets) == 1 and abs(onsets[0] - 8000) <= 100
+    sustained = e.copy()
+    sustained[8000:, 0] += 0.5 * np.sin(np.arange(12000) * 0.3)
+    assert transients(sustained, 100, 1000) == []
