@@ -307,3 +307,21 @@ def force_response(model: LinearModel, h: np.ndarray, gains: list[np.ndarray], o
             for j, g in enumerate(gains):
                 out[:, o, j] += 2 * np.real(np.sum(model.C[i] * lam ** (int(kd) - 1) * -g)) * h
     return out
+
+
+def lstsq(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least squares for tall, narrow systems: the normal equations of the column-scaled matrix by
+    Cholesky (the columns of modal responses differ in scale by orders), a ridge of 1e-12 of the
+    diagonal keeping them definite; falls back to SVD when they are not. Many times faster than SVD on
+    the 10^4 x 10^1 systems that pole fitting solves thousands of times."""
+    norms = np.sqrt(np.einsum("ij,ij->j", X, X))
+    norms = np.where(norms > 0, norms, 1.0)
+    Xs = X / norms
+    A = Xs.T @ Xs
+    A[np.diag_indices_from(A)] += 1e-12
+    try:
+        c = np.linalg.cholesky(A)
+        sol = np.linalg.solve(c.T, np.linalg.solve(c, Xs.T @ y))
+    except np.linalg.LinAlgError:
+        sol = np.linalg.lstsq(Xs, y, rcond=None)[0]
+    return sol / norms

@@ -31,7 +31,7 @@ from scipy.stats import t as student_t
 
 from .baselines import Baseline, Location
 from .catalogue import CAUSES, CONTACT, JOINT, SIDES, force_series, law_parameters, shapes
-from .model import Element, LinearModel, force_response, nudging_gain, simulate, substeps_for
+from .model import Element, LinearModel, force_response, lstsq, nudging_gain, simulate, substeps_for
 from .signals import ORDER, Prepared, convert
 from .split import Split
 
@@ -230,7 +230,7 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
         X = np.concatenate([force_responses(model, prep, cols[:, c], gains)[rows] / scale[None, :, None]
                             for c in range(cols.shape[1])], axis=2).reshape(rows.size * scale.size, -1)
         try:
-            theta, *_ = np.linalg.lstsq(X, target, rcond=None)
+            theta = lstsq(X, target)
         except np.linalg.LinAlgError:
             continue
         r2 = 1.0 - float(np.sum((target - X @ theta) ** 2)) / tt

@@ -32,7 +32,7 @@ from scipy.signal import csd, welch
 
 EXCITATIONS = ("force", "base_acceleration", "voltage")
 RESPONSES = ("displacement", "velocity", "acceleration")
-MIN_CYCLES = 5  # the band's low edge holds at least this many periods in the record
+MIN_CYCLES = 20  # the band's low edge holds at least this many periods in the record
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..model import Element, LinearModel, mode_states
+from ..model import Element, LinearModel, lstsq, mode_states
 from ..signals import ORDER, Prepared, convert, frf
 from . import Baseline, Location, dominant_mode, element_force
 
@@ -72,7 +72,7 @@ def fit_residues(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements: 
     for i, kind in enumerate(prep.kinds):
         X = _design(poles, states, drive, t, ORDER[kind])
         y = prep.measured[rows, i] - (prep.base[rows, ORDER[kind]] if prep.base_excited else 0.0)
-        sol = np.linalg.lstsq(X, y, rcond=None)[0]
+        sol = lstsq(X, y)
         C[i] = sol[:m] + 1j * sol[m:2 * m]
         fit[:, i] = X @ sol + (prep.base[rows, ORDER[kind]] if prep.base_excited else 0.0)
     return C, fit
@@ -140,7 +140,7 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
             y = prep.measured[sub, i] - (prep.base[sub, o] if prep.base_excited else 0.0)
             if not np.all(np.isfinite(X)):
                 raise ValueError("poles left the stable half-plane")
-            sol = np.linalg.lstsq(X, y, rcond=None)[0]
+            sol = lstsq(X, y)
             C[i] = sol[:m] + 1j * sol[m:2 * m]
             for j in range(len(hb)):
                 q = sol[4 * m + 2 * m * j:4 * m + 2 * m * (j + 1)]
