@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from ident.config import build, parse_yaml, to_mapping
+from .lines import LineFormat
 from .sim.rig import RigConfig
 from .sim.sensors import CHANNELS
 
@@ -58,11 +59,21 @@ class Faults:
 class DaqConfig:
     rate_hz: float = field(default=2000.0, metadata={"min": 1.0, "max": 100_000.0})
     baudrate: int = field(default=921600, metadata={"min": 9600, "max": 100_000_000})
+    format: str = field(default="frames", metadata={"choices": ("frames", "lines")})  # binary frames v1 or text lines
+    lines: LineFormat = field(default_factory=LineFormat)  # how a text-line device prints (daq.lines)
     flush_s: float = field(default=1.0, metadata={"gt": 0.0, "max": 10.0})
     reconnect_backoff_s: tuple[float, ...] = field(default=(0.05, 0.1, 0.2, 0.5, 1.0),
                                                    metadata={"min": 0.0, "max": 60.0, "max_len": 32})
     calibration: Calibrations = field(default_factory=Calibrations)
     faults: Faults = field(default_factory=Faults)
+
+    def __post_init__(self):
+        lines = self.lines
+        if self.format == "lines" and lines.time is not None and lines.counter is None \
+                and lines.time_unit_s > 0.5 / self.rate_hz:
+            raise ValueError(f"daq.lines.time_unit_s = {lines.time_unit_s:g} s is coarser than half the sample period "
+                             f"({0.5e3 / self.rate_hz:g} ms): sample numbers cannot come from the time column; print "
+                             f"a finer time (micros()) or add a counter column")
 
 
 @dataclass(frozen=True)

@@ -105,6 +105,7 @@ MODEL_SCHEMA = {
 LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
 TOPICS = {"accel": "/rig/accel", "raw": "/rig/raw", "events": "/rig/events", "status": "/rig/status",
           "model": "/rig/model", "device": "/rig/device"}
+RAW_LINES = "text lines (daq.lines), as the config's daq.lines says"  # /rig/raw of a text-line device
 CHUNK_BYTES = 64 * 1024 * 1024  # chunks are closed by time (flush_s), this only bounds a runaway one
 
 
@@ -132,7 +133,8 @@ class McapRecorder:
             self._records += [Schema(id=sid, name=schema["title"], encoding="jsonschema", data=data),
                               Channel(id=ids[key], topic=TOPICS[key], message_encoding="json", schema_id=sid,
                                       metadata={})]
-        raw_meta = {"format": "daq.protocol v1 frames: 24-byte data frames, 36-byte status frames"}
+        raw_meta = {"format": "daq.protocol v1 frames: 24-byte data frames, 36-byte status frames"
+                    if config.daq.format == "frames" else RAW_LINES}
         ids["raw"] = self._w.register_channel(TOPICS["raw"], "application/octet-stream", 0, metadata=raw_meta)
         self._records.append(Channel(id=ids["raw"], topic=TOPICS["raw"], message_encoding="application/octet-stream",
                                      schema_id=0, metadata=raw_meta))

@@ -215,7 +215,9 @@ def info_cmd(args) -> int:
     print("events     " + (", ".join(f"{k} {v}" for k, v in sorted(kinds.items())) or "none"))
     if rec.status:
         st = rec.status[-1]
-        print(f"link       {st.get('crc_errors', 0)} CRC errors, {st.get('reconnects', 0)} reconnects")
+        errors = (f"{st['malformed_lines']} malformed lines" if "malformed_lines" in st
+                  else f"{st.get('crc_errors', 0)} CRC errors")
+        print(f"link       {errors}, {st.get('reconnects', 0)} reconnects")
         print("clock      " + _clock_text(st))
     return 0
 

@@ -15,7 +15,7 @@ from clitools import run_main
 from daq.cli import build_parser as daq_parser
 from daq.cli import main as daq_main
 from daq.config import MAX_CONFIG_BYTES, load_config
-from daq.protocol import Decoder
+from daq.lines import decoder_for
 from daq.sim.device import SimulatedDevice
 from ident.cli import parse_split
 from ident.cli.main import build_parser as ident_parser
@@ -119,7 +119,9 @@ VALUES = st.recursive(
     max_leaves=8)
 
 KEYS = {
-    "daq": ["rate_hz", "baudrate", "flush_s", "reconnect_backoff_s", "calibration", "faults"],
+    "daq": ["rate_hz", "baudrate", "flush_s", "reconnect_backoff_s", "calibration", "faults", "format", "lines"],
+    "daq.lines": ["delimiter", "columns", "base", "tip1", "tip2", "counter", "time", "clipped", "time_unit_s",
+                  "time_wrap", "counter_bits", "max_line_bytes"],
     "daq.faults": ["corrupt_byte_rate", "drop_byte_rate", "garbage_bursts_per_s", "garbage_burst_bytes",
                    "drop_frame_rate", "duplicate_frame_rate", "clock_drift_ppm", "disconnect_at_s", "disconnect_for_s",
                    "restart_at_s", "restart_for_s"],
@@ -161,7 +163,7 @@ def test_fuzz_configs_never_traceback(tmp_path_factory, data):
         TRACEBACKS.append(f"config {data}: {type(exc).__name__}: {exc}")
         raise
     with np.errstate(all="ignore"):
-        dec = Decoder()
+        dec = decoder_for(config.daq)  # binary frames or text lines, as the config says
         dec.feed(SimulatedDevice(config, seed=1).frames(40))
     assert dec.counters.frames + dec.counters.crc_errors > 0 or config.daq.faults.drop_frame_rate > 0
 
