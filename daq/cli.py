@@ -8,7 +8,6 @@ files, as ``NAME.part`` renamed to ``NAME`` when the recording ends.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import queue
 import signal
 import sys
@@ -22,7 +21,7 @@ import numpy as np
 from ident.cli import DURATION, SEED, WINDOW, OneLineParser, number, run_guarded
 from ident.live.pipeline import Pipeline, PipelineConfig, rolling_config
 
-from . import bench
+from . import bench, calibrate
 from .config import Config, load_config
 from .driver import Acquisition, Event
 from .eventlog import JsonlEvents
@@ -63,6 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--format", choices=("frames", "lines"), help="send binary frames (default) or text lines")
     s.set_defaults(func=sim)
     bench.add_parser(sub)
+    calibrate.add_parser(sub, add_link_options)
     return p
 
 
@@ -78,10 +78,7 @@ def add_link_options(p) -> None:
 
 def link_config(args) -> Config:
     """The config with --format and --baud applied (what is recorded as the resolved config)."""
-    cfg = load_config(args.config)
-    changes = {k: v for k, v in (("format", getattr(args, "format", None)), ("baudrate", getattr(args, "baud", None)))
-               if v is not None}
-    return dataclasses.replace(cfg, daq=dataclasses.replace(cfg.daq, **changes)) if changes else cfg
+    return load_config(args.config).with_link(getattr(args, "format", None), getattr(args, "baud", None))
 
 
 def add_live_options(p, beside: str) -> None:

@@ -19,7 +19,8 @@ Channels (JSON schema encoding, readable by Foxglove and PlotJuggler):
   firmware, protocol, rate, counter, device time): who was recorded, and each boot.
 
 The resolved config is stored as metadata ``config`` (YAML text) and as the
-attachment ``config.yaml``; the calibration as metadata ``calibration``.
+attachment ``config.yaml``; the calibration (scale and offset per channel, and the sensors' model, serial
+number and sensitivity where the config gives them) as metadata ``calibration``.
 
 Crash safety: the file is written as ``NAME.part`` and renamed to ``NAME`` when
 closed (daq.safeio.PartFile), so a crash leaves a ``.part`` and never a half-written
@@ -142,10 +143,7 @@ class McapRecorder:
         text = yaml.safe_dump(config.to_mapping(), sort_keys=False)
         now = time.time_ns()
         self._w.add_metadata("config", {"yaml": text, "source": config.source})
-        scales, offsets = config.scales()
-        self._w.add_metadata("calibration", {
-            f"{name}.{what}": repr(v) for name, sc, off in zip(("base", "tip1", "tip2"), scales, offsets)
-            for what, v in (("scale_m_per_s2_per_count", sc), ("offset_m_per_s2", off))})
+        self._w.add_metadata("calibration", config.calibration_metadata())
         self._w.add_metadata("session", {"port": port, "rate_hz": repr(config.daq.rate_hz),
                                          "started_ns": str(now)})
         self._w.add_attachment(now, now, "config.yaml", "application/yaml", text.encode())

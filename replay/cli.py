@@ -200,6 +200,15 @@ def info_cmd(args) -> int:
         sessions = len({d["session_id"] for d in rec.devices})
         print(f"device     {d0['device_id']}, firmware {d0['firmware']}, protocol {d0['protocol']}, "
               f"{d0['rate_hz']:g} Hz; {sessions} session(s) (last {d1['session_id']})")
+    cal = rec.metadata.get("calibration", {})
+    for c in ("base", "tip1", "tip2"):
+        sensor = ", ".join(x for x in (cal.get(f"{c}.sensor_model", ""), cal.get(f"{c}.serial_number", "")
+                                       and f"SN {cal[f'{c}.serial_number']}") if x)
+        if sensor or f"{c}.sensitivity_counts_per_m_per_s2" in cal or f"{c}.sensitivity_mv_per_g" in cal:
+            scale = float(cal.get(f"{c}.scale_m_per_s2_per_count", "nan"))
+            print(f"sensor     {c}: {sensor or 'model not given'}; {scale:.6g} m/s^2 per count from "
+                  f"{cal.get(f'{c}.scale_from', '?')}" + (f" ({cal[f'{c}.calibrated']})" if cal.get(f"{c}.calibrated")
+                                                          else ""))
     recovery = rec.metadata.get("recovery", {})
     rep = sequence_report(rec.seq, rec.t_device, _ranges(recovery.get("lost_seq", "")))
     print(f"drops      {rep['drops']} frame(s) in {rep['drop_gaps']} gap(s) (lost by the device or the link)")

@@ -125,7 +125,8 @@ KEYS = {
     "daq.faults": ["corrupt_byte_rate", "drop_byte_rate", "garbage_bursts_per_s", "garbage_burst_bytes",
                    "drop_frame_rate", "duplicate_frame_rate", "clock_drift_ppm", "disconnect_at_s", "disconnect_for_s",
                    "restart_at_s", "restart_for_s"],
-    "daq.calibration.base": ["scale_m_per_s2_per_count", "offset_m_per_s2"],
+    "daq.calibration.base": ["scale_m_per_s2_per_count", "offset_m_per_s2", "sensitivity_counts_per_m_per_s2",
+                             "sensitivity_mv_per_g", "adc_mv_per_count", "sensor_model", "serial_number", "calibrated"],
     "sensors.tip1": ["gain", "offset_m_per_s2", "noise_rms_m_per_s2", "range_m_per_s2", "adc_bits"],
     "excitation": ["frequency_hz", "amplitude_m_per_s2", "ramp_s", "steps", "kicks", "sweep", "noise_rms_m_per_s2",
                    "noise_band_hz", "seed"],
@@ -183,7 +184,8 @@ def test_fuzz_config_text_never_tracebacks(tmp_path_factory, text):
 
 
 NUMERIC_OPTIONS = [
-    (daq_parser, ["record", "--sim"], ["--duration", "--window", "--hop"]),
+    (daq_parser, ["record", "--sim"], ["--duration", "--window", "--hop", "--baud"]),
+    (daq_parser, ["calibrate", "--channel", "tip1"], ["--duration", "--reference-rms", "--reference-hz", "--baud"]),
     (daq_parser, ["sim"], ["--duration", "--seed", "--device-id"]),
     (daq_parser, ["bench"], ["--seconds"]),
     (replay_parser, ["play", "x.mcap"], ["--rate", "--start", "--duration", "--window", "--hop", "--fs"]),

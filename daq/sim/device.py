@@ -35,8 +35,13 @@ def new_session_id() -> int:
 
 
 class SimulatedDevice:
-    def __init__(self, config: Config, seed: int | None = None, device_id: int = DEFAULT_DEVICE_ID):
+    """``calibrator``: (channel index, frequency [Hz], rms [m/s^2]): that sensor sits on a handheld reference
+    calibrator instead of the rig (``daq calibrate`` without a port); its gain, offset, noise and ADC apply."""
+
+    def __init__(self, config: Config, seed: int | None = None, device_id: int = DEFAULT_DEVICE_ID,
+                 calibrator: tuple[int, float, float] | None = None):
         self.config = config
+        self.calibrator = calibrator
         self.rate_hz = config.daq.rate_hz
         # Compile the rig kernel now (a throwaway simulator), not on the first real-time sample:
         # on a fresh install that takes seconds, which would show as a burst of overdue frames.
@@ -91,7 +96,12 @@ class SimulatedDevice:
         _, out = self.sim.advance(n)
         counts = np.empty((n, 3), np.int32)
         clipped = np.zeros(n, bool)
-        for j, (sig, sensor) in enumerate(zip((out.base, out.tip1, out.tip2), self.config.rig.sensors)):
+        signals = [out.base, out.tip1, out.tip2]
+        if self.calibrator is not None:
+            ch, f_hz, rms = self.calibrator
+            t = (self.sample_index + np.arange(n)) / self.rate_hz
+            signals[ch] = rms * np.sqrt(2.0) * np.sin(2 * np.pi * f_hz * t)
+        for j, (sig, sensor) in enumerate(zip(signals, self.config.rig.sensors)):
             counts[:, j], c = to_counts(sig, sensor, self.rng)
             clipped |= c
         seq = self.seq + np.arange(n)
