@@ -188,7 +188,7 @@ def sequence_report(seq: np.ndarray, t_device: np.ndarray, lost_to_damage: list[
 def info_cmd(args) -> int:
     path = Path(args.file)
     if formats.format_of(path) is not formats.mcap:
-        raise ValueError("info reads MCAP recordings; for a CSV or MAT file, use replay import first")
+        raise ValueError("info reads MCAP recordings; for a CSV, MAT, UFF or TDMS file, use replay import first")
     rec = read_recording(path, raw=False)
     print(f"file       {path}")
     print(f"samples    {len(rec.seq)}")
