@@ -21,8 +21,8 @@ import numpy as np
 from ident.cli import DURATION, SEED, WINDOW, OneLineParser, number, run_guarded
 from ident.live.pipeline import Pipeline, PipelineConfig, rolling_config
 
-from . import bench
-from .config import load_config
+from . import bench, calibrate
+from .config import Config, load_config
 from .driver import Acquisition, Event
 from .eventlog import JsonlEvents
 from .recorder import McapRecorder
@@ -46,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--duration", type=DURATION, help="stop after this many seconds of samples")
     r.add_argument("--quiet", action="store_true", help="no live status line")
     r.add_argument("--force", action="store_true", help="replace existing output files")
+    add_link_options(r)
     add_live_options(r, "the recording")
     r.set_defaults(func=record)
     s = sub.add_parser("sim", help="serve the simulated rig on a pty and print its path")
@@ -58,9 +59,26 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"the unit's id in its status frames (default {DEFAULT_DEVICE_ID:#x})")
     s.add_argument("--force", action="store_true", help="replace a --link symlink that points at something "
                                                         "other than a pty (the link, never a file)")
+    s.add_argument("--format", choices=("frames", "lines"), help="send binary frames (default) or text lines")
     s.set_defaults(func=sim)
     bench.add_parser(sub)
+    calibrate.add_parser(sub, add_link_options)
     return p
+
+
+def add_link_options(p) -> None:
+    """What the device sends and how fast the line runs (override the config's daq.format and daq.baudrate)."""
+    p.add_argument("--format", choices=("frames", "lines"),
+                   help="frames: binary frames v1 (the reference firmware, the simulated rig; the default); lines: "
+                        "one sample per text line, read as the config's daq.lines says")
+    p.add_argument("--baud", type=number(9600, 100_000_000, integer=True),
+                   help="baud rate of a UART link (default: the config's daq.baudrate, 921600); USB devices such "
+                        "as a Teensy ignore it")
+
+
+def link_config(args) -> Config:
+    """The config with --format and --baud applied (what is recorded as the resolved config)."""
+    return load_config(args.config).with_link(getattr(args, "format", None), getattr(args, "baud", None))
 
 
 def add_live_options(p, beside: str) -> None:
@@ -83,7 +101,7 @@ def check_live(args) -> None:
 
 
 def sim(args) -> int:
-    cfg = load_config(args.config)
+    cfg = link_config(args)
     if args.link is not None:
         check_outputs([Output("--link", args.link)], [args.config], force=True)  # a folder or the config itself
         check_link(args.link, args.force)
@@ -108,7 +126,7 @@ def _port_input(port: str | None) -> Path | None:
 
 def record(args) -> int:
     check_live(args)
-    cfg = load_config(args.config)
+    cfg = link_config(args)
     out = args.output or Path(time.strftime("rig-%Y%m%d-%H%M%S.mcap"))
     mode = "none" if args.no_identify else resolve_mode(args.viewer)
     rrd = out.with_suffix(".rrd") if mode == "save" else None
@@ -200,8 +218,9 @@ def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | No
     if not args.quiet:
         print(file=sys.stderr)
     per = size / st["samples"] if st["samples"] else float("nan")
+    link = (f"{st['malformed_lines']} malformed lines" if "malformed_lines" in st else f"{st['crc_errors']} CRC errors")
     print(f"{out}: {st['samples']} samples, {st['dropped_frames']} dropped, {st['duplicates']} duplicates, "
-          f"{st['crc_errors']} CRC errors, {st['reconnects']} reconnects, {st['restarts']} device restarts, "
+          f"{link}, {st['reconnects']} reconnects, {st['restarts']} device restarts, "
           f"{size} bytes ({per:.1f} bytes per 3-channel sample)")
     if live is not None and live.identify:
         print(live.summary())

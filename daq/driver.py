@@ -38,7 +38,8 @@ import numpy as np
 import serial
 
 from .config import Config
-from .protocol import FLAG_CLIPPED, Decoder, Frames, Status
+from .lines import LineCounters, decoder_for
+from .protocol import FLAG_CLIPPED, Frames, Status
 from .transport import register_url_handler
 
 IDENTIFY_S = 2.5  # after a reconnect, a status frame must arrive within this long (they come every second)
@@ -152,7 +153,7 @@ class Acquisition:
         self.on_event = on_event or (lambda e: None)
         self.on_raw = on_raw or (lambda d, ns: None)
         self.on_status = on_status or (lambda s, ns: None)
-        self.decoder = Decoder()
+        self.decoder = decoder_for(config.daq)  # binary frames (daq.protocol) or text lines (daq.lines)
         self.clock = ClockEstimator()
         self.stop_event = threading.Event()
         self.samples = 0
@@ -165,7 +166,7 @@ class Acquisition:
         scales, offsets = config.scales()
         self._scale = np.array(scales)
         self._offset = np.array(offsets)
-        self._last_counters = (0, 0, 0, 0, 0)
+        self._last_counters = (0, 0, 0, 0, 0, 0)
         self.first_device_s: float | None = None
         self.last_device_s: float | None = None
         self._epoch_offset: float | None = None  # timeline = device time + this
@@ -270,6 +271,7 @@ class Acquisition:
             except (serial.SerialException, OSError, ValueError):
                 continue
             self.reconnects += 1
+            self.decoder.reopened(self.now() - t_lost)
             self._event("reconnect", f"port reopened after {self.now() - t_lost:.2f} s and {attempt} attempts"
                         + (" (held until the device proves its identity)" if self.identity else ""),
                         "warning", gap_s=self.now() - t_lost, attempts=attempt, resolved=self.resolved_port)
@@ -383,9 +385,10 @@ class Acquisition:
 
     def _report_counters(self, fr: Frames | None = None) -> None:
         c = self.decoder.counters
-        now = (c.crc_errors, c.dropped_frames, c.skipped_bytes, c.duplicates, c.unknown_version)
-        pc, pd, ps, pdup, punk = self._last_counters
-        crc, drop, skip, dup, unk = now
+        now = (c.crc_errors, c.dropped_frames, c.skipped_bytes, c.duplicates, c.unknown_version,
+               getattr(c, "malformed_lines", 0))
+        pc, pd, ps, pdup, punk, pbad = self._last_counters
+        crc, drop, skip, dup, unk, bad = now
         if fr is not None and len(fr.gaps):
             where = np.flatnonzero(fr.gaps)
             for k in where[:10]:
@@ -402,6 +405,9 @@ class Acquisition:
             self._event("unknown_version", f"{unk - punk} frame start(s) A5 5A with an unknown protocol version "
                         f"({', '.join(str(v) for v in sorted(c.versions_seen))}; this host reads version 1) skipped",
                         "warning", count=unk - punk, versions=sorted(c.versions_seen))
+        if bad > pbad:
+            self._event("malformed", f"{bad - pbad} malformed line(s) skipped (last: {self.decoder.last_problem})",
+                        "warning", count=bad - pbad, last=self.decoder.last_problem)
         self._last_counters = now
 
     def status(self) -> dict:
@@ -416,6 +422,8 @@ class Acquisition:
             "clock_offset_s": est[0] if realtime else None, "clock_drift_ppm": est[1] if realtime else None,
             "device_rate_ratio": (1e-6 * est[1] + 1.0) if est is not None else None,
         }
+        if isinstance(c, LineCounters):
+            out["malformed_lines"], out["text_lines"] = c.malformed_lines, c.text_lines
         if self.identity is not None:
             out["device_id"] = f"{self.identity.device_id:08x}"
         if self.session is not None:

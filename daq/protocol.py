@@ -220,6 +220,10 @@ class Decoder:
         """End of stream: complete frames left in the buffer are decoded, the rest is skipped."""
         return self._scan(final=True)
 
+    def reopened(self, outage_s: float = 0.0) -> None:
+        """The port was reopened (the driver tells every decoder). Nothing to do here: the CRC finds the
+        frames' edges, the sequence counter the frames lost (daq.lines needs it)."""
+
     def _scan(self, final: bool) -> Frames:
         buf = self._buf
         n = len(buf)

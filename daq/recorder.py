@@ -19,7 +19,8 @@ Channels (JSON schema encoding, readable by Foxglove and PlotJuggler):
   firmware, protocol, rate, counter, device time): who was recorded, and each boot.
 
 The resolved config is stored as metadata ``config`` (YAML text) and as the
-attachment ``config.yaml``; the calibration as metadata ``calibration``.
+attachment ``config.yaml``; the calibration (scale and offset per channel, and the sensors' model, serial
+number and sensitivity where the config gives them) as metadata ``calibration``.
 
 Crash safety: the file is written as ``NAME.part`` and renamed to ``NAME`` when
 closed (daq.safeio.PartFile), so a crash leaves a ``.part`` and never a half-written
@@ -105,6 +106,7 @@ MODEL_SCHEMA = {
 LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
 TOPICS = {"accel": "/rig/accel", "raw": "/rig/raw", "events": "/rig/events", "status": "/rig/status",
           "model": "/rig/model", "device": "/rig/device"}
+RAW_LINES = "text lines (daq.lines), as the config's daq.lines says"  # /rig/raw of a text-line device
 CHUNK_BYTES = 64 * 1024 * 1024  # chunks are closed by time (flush_s), this only bounds a runaway one
 
 
@@ -132,7 +134,8 @@ class McapRecorder:
             self._records += [Schema(id=sid, name=schema["title"], encoding="jsonschema", data=data),
                               Channel(id=ids[key], topic=TOPICS[key], message_encoding="json", schema_id=sid,
                                       metadata={})]
-        raw_meta = {"format": "daq.protocol v1 frames: 24-byte data frames, 36-byte status frames"}
+        raw_meta = {"format": "daq.protocol v1 frames: 24-byte data frames, 36-byte status frames"
+                    if config.daq.format == "frames" else RAW_LINES}
         ids["raw"] = self._w.register_channel(TOPICS["raw"], "application/octet-stream", 0, metadata=raw_meta)
         self._records.append(Channel(id=ids["raw"], topic=TOPICS["raw"], message_encoding="application/octet-stream",
                                      schema_id=0, metadata=raw_meta))
@@ -140,10 +143,7 @@ class McapRecorder:
         text = yaml.safe_dump(config.to_mapping(), sort_keys=False)
         now = time.time_ns()
         self._w.add_metadata("config", {"yaml": text, "source": config.source})
-        scales, offsets = config.scales()
-        self._w.add_metadata("calibration", {
-            f"{name}.{what}": repr(v) for name, sc, off in zip(("base", "tip1", "tip2"), scales, offsets)
-            for what, v in (("scale_m_per_s2_per_count", sc), ("offset_m_per_s2", off))})
+        self._w.add_metadata("calibration", config.calibration_metadata())
         self._w.add_metadata("session", {"port": port, "rate_hz": repr(config.daq.rate_hz),
                                          "started_ns": str(now)})
         self._w.add_attachment(now, now, "config.yaml", "application/yaml", text.encode())

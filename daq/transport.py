@@ -56,11 +56,12 @@ def check_link(link: Path, force: bool = False) -> None:
 
 class PtyServer:
     def __init__(self, config: Config, link: str | Path | None = None, seed: int | None = None,
-                 device_id: int = DEFAULT_DEVICE_ID, force_link: bool = False):
+                 device_id: int = DEFAULT_DEVICE_ID, force_link: bool = False,
+                 calibrator: tuple[int, float, float] | None = None):
         self.link = Path(link) if link else None
         if self.link is not None:
             check_link(self.link, force_link)
-        self.device = SimulatedDevice(config, seed, device_id)
+        self.device = SimulatedDevice(config, seed, device_id, calibrator)
         self.config = config
         self._stop = threading.Event()
         self._master: int | None = None

@@ -120,7 +120,8 @@ def build(cls: type[T], data: Any, source: str, prefix: str = "") -> T:
     known = {f.name: f for f in fields(cls) if f.init}
     unknown = [k for k in data if k not in known]
     if unknown:
-        key = str(unknown[0]) if len(str(unknown[0])) <= 40 else str(unknown[0])[:37] + "..."
+        key = str(unknown[0]).encode("unicode_escape").decode("ascii")  # a newline in a key stays one line
+        key = key if len(key) <= 40 else key[:37] + "..."
         where = f"{prefix}.{key}" if prefix else key
         raise ValueError(f"{source}: unknown key '{where}'; allowed: {', '.join(known)}")
     kwargs = {}

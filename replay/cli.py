@@ -2,8 +2,8 @@
 
     replay [play] FILE [--rate X | --max] [--start S] [--duration D] [--loop] [--viewer MODE] [--events OUT.jsonl]
     replay info FILE
-    replay export FILE (--csv OUT.csv | --mat OUT.mat | -o OUT.{csv,mat})
-    replay import IN.{csv,mat} -o OUT.mcap [--time COL | --fs HZ] [--base COL] [--tip1 COL] [--tip2 COL]
+    replay export FILE (--csv OUT.csv | --mat OUT.mat | --uff OUT.uff | -o OUT.{csv,mat,uff,unv,tdms})
+    replay import IN.{csv,mat,uff,unv,tdms} -o OUT.mcap [--time COL | --fs HZ] [--base COL] [--tip1 COL] [--tip2 COL]
     replay recover BROKEN -o FIXED
 
 ``replay FILE ...`` is ``replay play FILE ...``: options may come before or after the file. Every
@@ -77,15 +77,19 @@ def build_parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="duration, rate, device, drops, damage, clock, events")
     i.add_argument("file")
     i.set_defaults(func=info_cmd)
-    e = sub.add_parser("export", help="export the recorded samples as CSV or MAT")
+    e = sub.add_parser("export", help="export the recorded samples as CSV, MAT, UFF 58 or TDMS")
     e.add_argument("file")
     out = e.add_mutually_exclusive_group(required=True)
     out.add_argument("--csv", type=Path, help="CSV to write: t,seq,base,tip1,tip2")
     out.add_argument("--mat", type=Path, help="MAT file to write: t, seq, base, tip1, tip2, Fs")
-    out.add_argument("-o", "--output", type=Path, help="file to write, format by suffix (.csv, .mat)")
+    out.add_argument("--uff", type=Path, help="UFF file to write: datasets 58 (time histories) base, tip1, tip2 in "
+                                              "m/s^2, lost frames filled")
+    out.add_argument("-o", "--output", type=Path, help="file to write, format by suffix (.csv, .mat, .uff, .unv, "
+                                                       ".tdms)")
     e.add_argument("--force", action="store_true", help="replace an existing output")
     e.set_defaults(func=export_cmd)
-    im = sub.add_parser("import", help="turn a CSV or MAT file from another DAQ into an MCAP recording")
+    im = sub.add_parser("import", help="turn a CSV, MAT, UFF 58 or TDMS file from another DAQ into an MCAP "
+                                       "recording")
     im.add_argument("file")
     im.add_argument("-o", "--output", type=Path, required=True)
     im.add_argument("--force", action="store_true", help="replace an existing output")
@@ -184,7 +188,7 @@ def sequence_report(seq: np.ndarray, t_device: np.ndarray, lost_to_damage: list[
 def info_cmd(args) -> int:
     path = Path(args.file)
     if formats.format_of(path) is not formats.mcap:
-        raise ValueError("info reads MCAP recordings; for a CSV or MAT file, use replay import first")
+        raise ValueError("info reads MCAP recordings; for a CSV, MAT, UFF or TDMS file, use replay import first")
     rec = read_recording(path, raw=False)
     print(f"file       {path}")
     print(f"samples    {len(rec.seq)}")
@@ -200,6 +204,15 @@ def info_cmd(args) -> int:
         sessions = len({d["session_id"] for d in rec.devices})
         print(f"device     {d0['device_id']}, firmware {d0['firmware']}, protocol {d0['protocol']}, "
               f"{d0['rate_hz']:g} Hz; {sessions} session(s) (last {d1['session_id']})")
+    cal = rec.metadata.get("calibration", {})
+    for c in ("base", "tip1", "tip2"):
+        sensor = ", ".join(x for x in (cal.get(f"{c}.sensor_model", ""), cal.get(f"{c}.serial_number", "")
+                                       and f"SN {cal[f'{c}.serial_number']}") if x)
+        if sensor or f"{c}.sensitivity_counts_per_m_per_s2" in cal or f"{c}.sensitivity_mv_per_g" in cal:
+            scale = float(cal.get(f"{c}.scale_m_per_s2_per_count", "nan"))
+            print(f"sensor     {c}: {sensor or 'model not given'}; {scale:.6g} m/s^2 per count from "
+                  f"{cal.get(f'{c}.scale_from', '?')}" + (f" ({cal[f'{c}.calibrated']})" if cal.get(f"{c}.calibrated")
+                                                          else ""))
     recovery = rec.metadata.get("recovery", {})
     rep = sequence_report(rec.seq, rec.t_device, _ranges(recovery.get("lost_seq", "")))
     print(f"drops      {rep['drops']} frame(s) in {rep['drop_gaps']} gap(s) (lost by the device or the link)")
@@ -215,7 +228,9 @@ def info_cmd(args) -> int:
     print("events     " + (", ".join(f"{k} {v}" for k, v in sorted(kinds.items())) or "none"))
     if rec.status:
         st = rec.status[-1]
-        print(f"link       {st.get('crc_errors', 0)} CRC errors, {st.get('reconnects', 0)} reconnects")
+        errors = (f"{st['malformed_lines']} malformed lines" if "malformed_lines" in st
+                  else f"{st.get('crc_errors', 0)} CRC errors")
+        print(f"link       {errors}, {st.get('reconnects', 0)} reconnects")
         print("clock      " + _clock_text(st))
     return 0
 
@@ -234,15 +249,23 @@ def _clock_text(st: dict) -> str:
 
 
 def export_cmd(args) -> int:
-    out, label = ((args.csv, "--csv") if args.csv else (args.mat, "--mat") if args.mat else (args.output, "-o"))
+    out, label = next((p, lab) for p, lab in ((args.csv, "--csv"), (args.mat, "--mat"), (args.uff, "--uff"),
+                                               (args.output, "-o")) if p is not None)
     module = formats.format_of(out)
     if module is formats.mcap:
-        raise ValueError(f"{label} {out}: export writes CSV or MAT; the input already is a recording")
+        raise ValueError(f"{label} {out}: export writes CSV, MAT, UFF or TDMS; the input already is a recording")
+    if label == "--uff" and module is not formats.uff:
+        raise ValueError(f"--uff {out}: give a file name ending in .uff or .unv")
     check_outputs([Output(label, out)], [args.file], args.force)
     samples = formats.read_samples(args.file, fill=False)
     module.write_samples(out, samples, force=args.force, inputs=[args.file], label=label)
-    print(f"{out}: {int(np.count_nonzero(~samples.filled))} rows (t in s from the first sample, "
-          f"accelerations in m/s^2)")
+    rows = int(np.count_nonzero(~samples.filled))
+    if module in (formats.uff, formats.tdms):  # even time histories: the lost frames are filled
+        n = int(round((samples.t[-1] - samples.t[0]) * samples.fs_hz)) + 1 if len(samples.t) else 0
+        print(f"{out}: base, tip1, tip2 in m/s^2, {n} samples at {samples.fs_hz:.6g} Hz ({n - rows} lost frame(s) "
+              f"filled by linear interpolation)")
+    else:
+        print(f"{out}: {rows} rows (t in s from the first sample, accelerations in m/s^2)")
     return 0
 
 

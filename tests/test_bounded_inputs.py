@@ -15,7 +15,7 @@ from clitools import run_main
 from daq.cli import build_parser as daq_parser
 from daq.cli import main as daq_main
 from daq.config import MAX_CONFIG_BYTES, load_config
-from daq.protocol import Decoder
+from daq.lines import decoder_for
 from daq.sim.device import SimulatedDevice
 from ident.cli import parse_split
 from ident.cli.main import build_parser as ident_parser
@@ -119,11 +119,14 @@ VALUES = st.recursive(
     max_leaves=8)
 
 KEYS = {
-    "daq": ["rate_hz", "baudrate", "flush_s", "reconnect_backoff_s", "calibration", "faults"],
+    "daq": ["rate_hz", "baudrate", "flush_s", "reconnect_backoff_s", "calibration", "faults", "format", "lines"],
+    "daq.lines": ["delimiter", "columns", "base", "tip1", "tip2", "counter", "time", "clipped", "time_unit_s",
+                  "time_wrap", "counter_bits", "max_line_bytes"],
     "daq.faults": ["corrupt_byte_rate", "drop_byte_rate", "garbage_bursts_per_s", "garbage_burst_bytes",
                    "drop_frame_rate", "duplicate_frame_rate", "clock_drift_ppm", "disconnect_at_s", "disconnect_for_s",
                    "restart_at_s", "restart_for_s"],
-    "daq.calibration.base": ["scale_m_per_s2_per_count", "offset_m_per_s2"],
+    "daq.calibration.base": ["scale_m_per_s2_per_count", "offset_m_per_s2", "sensitivity_counts_per_m_per_s2",
+                             "sensitivity_mv_per_g", "adc_mv_per_count", "sensor_model", "serial_number", "calibrated"],
     "sensors.tip1": ["gain", "offset_m_per_s2", "noise_rms_m_per_s2", "range_m_per_s2", "adc_bits"],
     "excitation": ["frequency_hz", "amplitude_m_per_s2", "ramp_s", "steps", "kicks", "sweep", "noise_rms_m_per_s2",
                    "noise_band_hz", "seed"],
@@ -161,7 +164,7 @@ def test_fuzz_configs_never_traceback(tmp_path_factory, data):
         TRACEBACKS.append(f"config {data}: {type(exc).__name__}: {exc}")
         raise
     with np.errstate(all="ignore"):
-        dec = Decoder()
+        dec = decoder_for(config.daq)  # binary frames or text lines, as the config says
         dec.feed(SimulatedDevice(config, seed=1).frames(40))
     assert dec.counters.frames + dec.counters.crc_errors > 0 or config.daq.faults.drop_frame_rate > 0
 
@@ -181,7 +184,8 @@ def test_fuzz_config_text_never_tracebacks(tmp_path_factory, text):
 
 
 NUMERIC_OPTIONS = [
-    (daq_parser, ["record", "--sim"], ["--duration", "--window", "--hop"]),
+    (daq_parser, ["record", "--sim"], ["--duration", "--window", "--hop", "--baud"]),
+    (daq_parser, ["calibrate", "--channel", "tip1"], ["--duration", "--reference-rms", "--reference-hz", "--baud"]),
     (daq_parser, ["sim"], ["--duration", "--seed", "--device-id"]),
     (daq_parser, ["bench"], ["--seconds"]),
     (replay_parser, ["play", "x.mcap"], ["--rate", "--start", "--duration", "--window", "--hop", "--fs"]),

@@ -92,6 +92,23 @@ def cases(w: Path):
         if what == "existing":
             t.write_bytes(PRECIOUS)
         out.append((f"replay export --csv {what}", replay_main, ["export", rec, "--csv", t], [t, rec]))
+    for what, target in (("existing", precious), ("hard link", w / "hard-rec.mcap"), ("symlink", w / "sym-rec.mcap")):
+        for suffix, opt in ((".uff", "--uff"), (".tdms", "-o")):
+            name = target.with_name(target.name + suffix)
+            if what == "existing":
+                name.write_bytes(PRECIOUS)
+            elif not os.path.lexists(name):
+                (os.link if what == "hard link" else os.symlink)(rec, name)
+            out.append((f"replay export {opt} {suffix} {what}", replay_main, ["export", rec, opt, name], [name, rec]))
+    cal = ["calibrate", "--port", "rig://?seed=1&calibrator=tip1", "--channel", "tip1", "--duration", "1"]
+    for what, target in (("existing", precious), ("the config", cfg), ("hard link", w / "hard-rig.yaml"),
+                         ("symlink", w / "sym-rig.yaml")):
+        out.append((f"daq calibrate -o {what}", daq_main, cal + ["--config", cfg, "-o", target], [target, cfg]))
+        out.append((f"daq calibrate --recording {what}", daq_main,
+                    cal + ["--config", cfg, "-o", w / "new.yaml", "--recording", target], [target, cfg]))
+    out.append(("daq calibrate in place without --force", daq_main, cal + ["--config", cfg], [cfg]))
+    out.append(("daq calibrate -o a --recording a", daq_main, cal + ["-o", w / "c.yaml", "--recording", w / "c.yaml"],
+                [w / "c.yaml"]))
     out.append(("replay recover garbage -o existing", replay_main, ["recover", w / "garbage.mcap", "-o", precious],
                 [precious]))
     out.append(("replay recover garbage -o existing --force", replay_main,

@@ -20,6 +20,7 @@ import os
 import numpy as np
 
 from ..config import Config
+from ..lines import encode_lines, header_line
 from ..protocol import FLAG_CLIPPED, encode, encode_status
 from .rig import RigSimulator
 from .sensors import to_counts
@@ -34,8 +35,13 @@ def new_session_id() -> int:
 
 
 class SimulatedDevice:
-    def __init__(self, config: Config, seed: int | None = None, device_id: int = DEFAULT_DEVICE_ID):
+    """``calibrator``: (channel index, frequency [Hz], rms [m/s^2]): that sensor sits on a handheld reference
+    calibrator instead of the rig (``daq calibrate`` without a port); its gain, offset, noise and ADC apply."""
+
+    def __init__(self, config: Config, seed: int | None = None, device_id: int = DEFAULT_DEVICE_ID,
+                 calibrator: tuple[int, float, float] | None = None):
         self.config = config
+        self.calibrator = calibrator
         self.rate_hz = config.daq.rate_hz
         # Compile the rig kernel now (a throwaway simulator), not on the first real-time sample:
         # on a fresh install that takes seconds, which would show as a burst of overdue frames.
@@ -53,6 +59,7 @@ class SimulatedDevice:
         self.session_id = new_session_id()
         self.status_counter = 0
         self.boots += 1
+        self._header_due = True  # a line-printing sketch prints its header in setup()
 
     def restart(self) -> None:
         """The firmware reboots: sequence and clock from 0, a new session id; the rig keeps moving."""
@@ -89,7 +96,12 @@ class SimulatedDevice:
         _, out = self.sim.advance(n)
         counts = np.empty((n, 3), np.int32)
         clipped = np.zeros(n, bool)
-        for j, (sig, sensor) in enumerate(zip((out.base, out.tip1, out.tip2), self.config.rig.sensors)):
+        signals = [out.base, out.tip1, out.tip2]
+        if self.calibrator is not None:
+            ch, f_hz, rms = self.calibrator
+            t = (self.sample_index + np.arange(n)) / self.rate_hz
+            signals[ch] = rms * np.sqrt(2.0) * np.sin(2 * np.pi * f_hz * t)
+        for j, (sig, sensor) in enumerate(zip(signals, self.config.rig.sensors)):
             counts[:, j], c = to_counts(sig, sensor, self.rng)
             clipped |= c
         seq = self.seq + np.arange(n)
@@ -100,6 +112,8 @@ class SimulatedDevice:
         if f.drop_frame_rate > 0:
             keep = self.rng.random(n) >= f.drop_frame_rate
         self.sent_frames += int(keep.sum())
+        if self.config.daq.format == "lines":
+            return self._byte_faults(self._lines(seq, t_us, counts, clipped, keep), n / self.rate_hz)
         data = encode(seq[keep], t_us[keep], counts[keep], np.where(clipped[keep], FLAG_CLIPPED, 0))
         copies = keep.astype(np.int64)
         if f.duplicate_frame_rate > 0:  # a frame sent twice in a row (a firmware retry)
@@ -122,6 +136,23 @@ class SimulatedDevice:
         self.seq = int(seq[-1]) + 1
         self.sample_index += n
         return self._byte_faults(data, n / self.rate_hz)
+
+    def _lines(self, seq, t_us, counts, clipped, keep) -> bytes:
+        """A line-printing sketch (daq.lines): a header line at boot when columns are named, then one line per
+        sample as the config's ``daq.lines`` says; a duplicated sample is its line printed twice."""
+        fmt = self.config.daq.lines
+        f = self.config.daq.faults
+        idx = np.flatnonzero(keep)
+        if f.duplicate_frame_rate > 0:
+            idx = np.repeat(idx, 1 + (self.rng.random(idx.size) < f.duplicate_frame_rate))
+        head = b""
+        if self._header_due:
+            self._header_due = False
+            if fmt.named() or fmt.columns:
+                head = header_line(fmt)
+        self.seq = int(seq[-1]) + 1
+        self.sample_index += len(seq)
+        return head + encode_lines(fmt, seq[idx], t_us[idx], counts[idx], clipped[idx])
 
     def _byte_faults(self, data: bytes, span_s: float) -> bytes:
         f = self.config.daq.faults

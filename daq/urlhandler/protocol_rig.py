@@ -1,4 +1,6 @@
-"""pyserial handler for ``rig://[?config=PATH][&seed=N][&realtime=1][&device_id=N]``: the simulated rig in process.
+"""pyserial handler for ``rig://[?config=PATH][&seed=N][&realtime=1][&device_id=N][&calibrator=CH]``: the
+simulated rig in process (``calibrator=tip1``: that sensor on a reference calibrator, 10 m/s^2 rms at
+159.2 Hz, or ``tip1:HZ:RMS``).
 
 Reads return the device's frames. With ``realtime=1`` they are paced by the
 clock like the real line; by default a read returns as many frames as asked
@@ -12,9 +14,11 @@ import urllib.parse
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
+from ..calibration import CALIBRATOR_HZ, CALIBRATOR_RMS_M_PER_S2
 from ..config import load_config
 from ..sim.device import DEFAULT_DEVICE_ID, SimulatedDevice
 from ..protocol import FRAME_LEN
+from ..sim.sensors import CHANNELS
 
 FAST_READ_FRAMES = 100  # frames a read finds waiting when not paced in real time
 
@@ -41,10 +45,10 @@ class Serial(SerialBase):
         if parts.scheme != "rig":
             raise SerialException(f"expected rig://[?config=PATH&seed=N&realtime=1&device_id=N], got {url!r}")
         opts = {k: v[-1] for k, v in urllib.parse.parse_qs(parts.query).items()}
-        unknown = set(opts) - {"config", "seed", "realtime", "device_id"}
+        unknown = set(opts) - {"config", "seed", "realtime", "device_id", "calibrator"}
         if unknown:
             raise SerialException(f"rig:// has no option {sorted(unknown)[0]!r}; options: config, seed, realtime, "
-                                  f"device_id")
+                                  f"device_id, calibrator")
         ints = {}
         for key in ("seed", "device_id"):
             if key in opts:
@@ -59,7 +63,8 @@ class Serial(SerialBase):
         except ValueError as exc:
             raise SerialException(str(exc)) from None
         self._realtime = opts.get("realtime", "0") not in ("0", "false", "")
-        return SimulatedDevice(cfg, ints.get("seed"), ints.get("device_id", DEFAULT_DEVICE_ID))
+        return SimulatedDevice(cfg, ints.get("seed"), ints.get("device_id", DEFAULT_DEVICE_ID),
+                               _calibrator(opts.get("calibrator")))
 
     def close(self):
         self.is_open = False
@@ -130,3 +135,21 @@ class Serial(SerialBase):
     @property
     def cd(self):
         return True
+
+
+def _calibrator(text: str | None) -> tuple[int, float, float] | None:
+    """``CH[:HZ[:RMS]]`` -> (channel index, frequency, rms); defaults 159.2 Hz, 10 m/s^2."""
+    if text is None:
+        return None
+    name, *rest = text.split(":")
+    if name not in CHANNELS or len(rest) > 2:
+        raise SerialException(f"rig:// option calibrator must be CHANNEL[:HZ[:RMS]] with CHANNEL one of "
+                              f"{', '.join(CHANNELS)}, got {text!r}")
+    try:
+        hz = float(rest[0]) if rest else CALIBRATOR_HZ
+        rms = float(rest[1]) if len(rest) > 1 else CALIBRATOR_RMS_M_PER_S2
+    except ValueError:
+        raise SerialException(f"rig:// option calibrator: {text!r} holds a value that is not a number") from None
+    if not (0 < hz < 1e6 and 0 < rms < 1e6):
+        raise SerialException(f"rig:// option calibrator: frequency and rms must be positive and finite, got {text!r}")
+    return CHANNELS.index(name), hz, rms

@@ -2,7 +2,8 @@
 
 DATA is a recording of this tool (.mcap: base, tip1, tip2), a CSV with a header row (``--time COL`` or
 ``--fs HZ``) or a MAT file (a ``1 x N`` variable is a column by its name, row i of a ``k x N`` one is NAMEi,
-the rate from ``Fs``). The baseline is the rig model of ``--model RIG.yaml``, or a modal model fitted to the
+the rate from ``Fs``), a UFF file (datasets 58 by ID line 1) or a TDMS file (channels by name; replay.formats).
+The baseline is the rig model of ``--model RIG.yaml``, or a modal model fitted to the
 data (or to ``--fit-data``, e.g. a low-level test). Columns: ``--excitation COL:KIND`` (force,
 base_acceleration or voltage) and ``--response COL:KIND`` (displacement, velocity or acceleration),
 repeated; defaults are the rig's base, tip1 and tip2 accelerations. START:STOP are sample indices.
@@ -18,7 +19,7 @@ import numpy as np
 from scipy.signal import welch
 from daq.config import read_yaml_file
 from daq.safeio import Output, check_outputs, safe_folder, safe_output
-from replay.formats import read_column_matrix, read_samples
+from replay.formats import format_of, mcap, read_column_matrix, read_samples
 
 from . import parse_split
 from ..config import build
@@ -77,7 +78,7 @@ def load_measurement(path: Path, args) -> Measurement:
     exc = _spec(args.excitation, EXCITATIONS, "base_acceleration", "excitation")
     resp = [_spec(r, RESPONSES, "acceleration", "response") for r in (args.response or ["tip1", "tip2"])]
     cols = [exc[0]] + [c for c, _ in resp]
-    if path.suffix.lower() in (".csv", ".txt", ".mat"):
+    if format_of(path) is not mcap:  # CSV, MAT, UFF 58, TDMS: columns by name
         data, fs = read_column_matrix(path, cols, args.time_col, args.fs_hz)
     else:
         s = read_samples(path)

@@ -23,7 +23,7 @@ from . import DURATION, OFFSET, RATE_HZ, number
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("fit", help="identify a recording (.mcap or .csv): the paper's studies 1-3")
+    p = sub.add_parser("fit", help="identify a recording (.mcap, .csv, .mat, .uff, .tdms): the paper's studies 1-3")
     p.add_argument("file")
     p.add_argument("--study", type=int, choices=(1, 2, 3), default=1,
                    help="1: no impact, one blade, 2-D; 2: localized, both blades, 4 states; 3: both impacting")

@@ -5,6 +5,8 @@
 | ``.mcap`` (and ``.mcap.part``) | :mod:`replay.formats.mcap` | samples, columns, every message | samples (``replay import``) |
 | ``.csv``, ``.txt`` | :mod:`replay.formats.csv` | samples, columns | samples (``replay export``) |
 | ``.mat`` | :mod:`replay.formats.mat` | samples, columns | samples (``replay export``) |
+| ``.uff``, ``.unv`` | :mod:`replay.formats.uff` | samples, columns (UFF dataset 58 time histories) | samples (``replay export``) |
+| ``.tdms`` | :mod:`replay.formats.tdms` | samples, columns (NI TDMS channels) | samples (``replay export``) |
 
 Each module has ``read_samples(path, **options) -> Samples``, ``read_columns(path, names, time_col,
 fs_hz) -> Columns`` and ``write_samples(path, samples, force=, inputs=)``; :func:`read_samples`,
@@ -19,10 +21,11 @@ from types import ModuleType
 
 import numpy as np
 
-from . import csv, mat, mcap
+from . import csv, mat, mcap, tdms, uff
 from .base import Columns, Samples
 
-FORMATS: dict[str, ModuleType] = {suffix: module for module in (mcap, csv, mat) for suffix in module.SUFFIXES}
+FORMATS: dict[str, ModuleType] = {suffix: module for module in (mcap, csv, mat, uff, tdms)
+                                   for suffix in module.SUFFIXES}
 
 __all__ = ["FORMATS", "Columns", "Samples", "format_of", "read_column_matrix", "read_columns", "read_samples",
            "write_samples"]

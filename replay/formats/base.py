@@ -81,3 +81,18 @@ def check_rate(fs_hz: float | None, what: str = "--fs") -> float:
     if fs_hz is None or not (1e-3 <= fs_hz <= 1e6):
         raise ValueError(f"{what} must be a sampling rate from 0.001 Hz to 1 MHz, got {fs_hz}")
     return float(fs_hz)
+
+
+def even_grid(samples: Samples) -> tuple[np.ndarray, np.ndarray]:
+    """Samples on their uniform grid for formats without holes (UFF 58, TDMS waveforms): values with lost
+    frames filled by linear interpolation, and the sequence number of each row (-1 where filled). Takes
+    samples read either way (``fill`` or not)."""
+    n = len(samples.t)
+    seq = np.arange(n) if samples.seq is None else np.asarray(samples.seq, np.int64)
+    if np.any(seq < 0) or n < 2:
+        return samples.values, seq
+    index = np.rint(np.asarray(samples.t) * samples.fs_hz).astype(np.int64)
+    if np.any(np.diff(index) <= 0):
+        raise ValueError(f"{samples.source}: sample times are not increasing; cannot write an even time history")
+    g = on_grid(index, samples.values, seq, samples.fs_hz, samples.source, fill=True)
+    return g.values, g.seq

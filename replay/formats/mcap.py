@@ -36,7 +36,7 @@ import zstandard
 from daq.config import Config, DaqConfig
 from daq.driver import SampleBlock
 from daq.protocol import Decoder
-from daq.recorder import TOPICS, McapRecorder
+from daq.recorder import RAW_LINES, TOPICS, McapRecorder
 from daq.sim.rig import RigConfig
 
 from .base import Columns, Samples, on_grid
@@ -621,6 +621,8 @@ def _from_raw(s: Scan, raw: bytes, events: list[dict]):
     cal = s.meta("calibration")
     if not raw or not cal:
         return None
+    if any(c.topic == TOPICS["raw"] and c.metadata.get("format") == RAW_LINES for c in s.channels.values()):
+        return None  # a text-line device: its lines have no checksum; the samples are the /rig/accel messages
     try:
         scale = np.array([float(cal[f"{c}.scale_m_per_s2_per_count"]) for c in CHANNELS])
         offset = np.array([float(cal[f"{c}.offset_m_per_s2"]) for c in CHANNELS])
