@@ -46,7 +46,7 @@ from ..discovery import Channel, Measurement, discover
 from ..discovery.result import candidate_json
 from ..rig import RigParams
 from . import DURATION, OFFSET, RATE_HZ
-from .batch_report import POOR_NRMSE, trusted_frequency, write_report
+from .batch_report import trusted_frequency, write_report
 from .discover import load_model
 from .engine import add_options, cores, session, unordered
 
@@ -420,7 +420,7 @@ def summary(rows: list[dict], path: Path) -> str:
         if any(r["beam1_equations"] for r in rows):
             lines.append(f"beam {beam} natural frequency: " + (f"median {np.median(fn):.3f} Hz, {min(fn):.3f} to "
                          f"{max(fn):.3f} Hz over {len(fn)} trusted fits" if fn else "no trusted fit")
-                         + f" (left out: one tone, or fit NRMSE > {POOR_NRMSE:g})")
+                         + " (left out: one tone, poor fits, contact in the segment)")
     causes: dict[str, int] = {}
     for r in rows:
         for f in json.loads(r["findings"]) if r["findings"] else []:

@@ -1,4 +1,8 @@
-"""``ident bench sweep``: this project's sparsification sweep against a plain pysindy loop.
+"""``ident bench sweep|discovery|batch``: the benchmarks (printed figures, not tests).
+
+``discovery`` is ``ident.cli.bench_discovery`` (hidden-effect cases, on Dask with ``--workers`` or
+``--scheduler``), ``batch`` is ``ident.cli.bench_batch`` (``ident batch`` on 1 and 2 local workers). Here:
+``sweep``, this project's sparsification sweep against a plain pysindy loop.
 
 Both run the same job on the paper's Table 2 data (Duffing, noise eta = 0.08
 on X and Xdot, states denoised as ``ident duffing`` does; on clean data every
