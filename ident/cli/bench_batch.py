@@ -47,6 +47,7 @@ from .engine import OneBlasThread, dask_client, run_unordered
 FS_HZ = 1000.0
 FN1_HZ = (11.2, 10.4)  # beam 1's natural frequency at the first and the last recording
 CUT_SHARE = 0.6
+NOOP_TASKS = 200
 
 
 def recording_plan(k: int, n: int, seed: int) -> dict:
@@ -132,6 +133,10 @@ def _key(row: dict) -> tuple:
     return tuple(sorted((k, v) for k, v in row.items() if k != "seconds"))
 
 
+def _noop(job):
+    return job
+
+
 def _warm(job) -> None:
     """Run one recording on a worker (imports, compiled kernels from their cache) before the clock starts."""
     OneBlasThread(analyse_job)(job)
@@ -182,6 +187,9 @@ def run_bench(args) -> int:
                 client.run(_warm, jobs[0])
                 t_start = time.perf_counter() - t0
                 if workers == 1:
+                    t0 = time.perf_counter()
+                    list(run_unordered(client, _noop, list(range(NOOP_TASKS)), "noop"))
+                    t_noop = (time.perf_counter() - t0) / NOOP_TASKS
                     light_1, t_light_1 = _on_dask(client, light)
                 tables[workers], times[workers] = _on_dask(client, jobs)
             print(f"{f'Dask, {workers} local worker' + ('s' if workers > 1 else ''):<27s}: {times[workers]:7.1f} s "
@@ -190,7 +198,7 @@ def run_bench(args) -> int:
         print(f"speed-up 1 -> 2 workers    : {times[1] / times[2]:.2f} x")
         print(f"engine overhead            : {1e3 * (t_light_1 - t_light) / n:+.1f} ms per recording with --regimes "
               f"({t_light:.1f} s in the loop, {t_light_1:.1f} s on 1 worker); {1e3 * (times[1] - t_loop) / n:+.1f} ms "
-              f"with --fit too")
+              f"with --fit too; {1e3 * t_noop:.1f} ms per task that does nothing")
         print(f"same table every way       : {same} (every column but the run time)")
         errors = [r for r in loop.values() if r["error"]]
         print(f"rows: {n}, with an error: {len(errors)}" + "".join(f"\n  {Path(r['file']).name}: {r['error']}"
