@@ -19,6 +19,7 @@ from ident.cli.discover import load_model
 from ident.cli.main import main as ident_main
 from ident.discovery import Channel, Measurement, discover
 from replay.formats import Samples, read_samples, write_samples
+from test_viewer import _children, _listening, _socket_inodes
 
 REC = Path(__file__).resolve().parents[1] / "recordings"
 FAST_FIT = ["--start", "5", "--duration", "3"]  # a short segment keeps the fits quick
@@ -210,16 +211,10 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path, monkeypatch):
     assert not (tmp_path / "r.csv").exists()
 
 
-def _listening_of_this_process_tree() -> list[tuple[str, int]]:
-    from test_viewer import _children, _listening, _socket_inodes
-
-    return _listening(_socket_inodes(_children(os.getpid())))
-
-
 @pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="needs Linux /proc")
 def test_the_local_cluster_listens_on_localhost_only(dask_scheduler):
     """Scheduler, nannies, workers and their HTTP servers: every listening socket on 127.0.0.1."""
-    listening = _listening_of_this_process_tree()
+    listening = _listening(_socket_inodes(_children(os.getpid())))
     port = int(dask_scheduler.rsplit(":", 1)[1])
     assert ("127.0.0.1", port) in listening and len(listening) >= 5, listening
     assert all(a == "127.0.0.1" for a, _ in listening), listening

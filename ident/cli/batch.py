@@ -374,8 +374,10 @@ def run(args) -> int:
     interrupted = False
     jobs = [(f, p.settings) for f in todo]
     with session(args.scheduler if todo else None, workers if todo else 0) as client:
+        where = "in this process" if client is None else (f"on {len(client.scheduler_info()['workers'])} Dask "
+                                                          f"workers ({client.scheduler.address})")
         print(f"ident batch: {len(p.files)} recordings, {len(p.files) - len(todo)} already in {args.output}, "
-              f"{len(todo)} to analyse ({', '.join(p.settings.analyses)})")
+              f"{len(todo)} to analyse ({', '.join(p.settings.analyses)}) {where}")
         with tqdm(total=len(todo), desc="batch", unit="file", disable=args.no_progress, file=sys.stderr) as bar:
             try:
                 with closing(unordered(client, analyse_job, jobs, "batch")) as results:
