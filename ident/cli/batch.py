@@ -11,8 +11,9 @@ A command line composing readers, like ``ident discover``: each task reads its f
   the verdict, findings with parameters and held-out gains.
 
 The table (``-o RESULTS.csv``) is CSV with JSON in the columns that hold lists (regimes, equations,
-findings): one file any spreadsheet, pandas (``pd.read_csv``) or the csv module opens, appended to row by
-row without rewriting a columnar file, and no further dependency. Rows are sorted by file. A file that
+findings): one file any spreadsheet, pandas (``pd.read_csv``) or the csv module opens, no further
+dependency, and small enough (a few thousand rows) to be rewritten whole at every save, which keeps each
+write atomic. Rows are sorted by file. A file that
 fails is a row with its error and the batch goes on; the table is rewritten atomically (``daq.safeio``)
 at most once a second while rows come in and at the end, so Ctrl-C keeps every finished row (a kill -9 the
 last second's). Run again with the same table: a row is kept when the same file (size and modification
