@@ -14,7 +14,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-
 from tqdm import tqdm
 
 from daq.safeio import Output, check_outputs, safe_folder, safe_output
