@@ -24,6 +24,9 @@ def add_parser(sub) -> None:
     p.add_argument("--seconds", type=float, default=10.0, help="length of the recording runs (default 10)")
     p.add_argument("--live", action="store_true",
                    help="also the live pipeline: replay --max speed, latency, CPU share of identification")
+    from . import bench_regimes
+
+    bench_regimes.add_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -39,6 +42,10 @@ def _timed(cmd: list[str]) -> tuple[float, float]:
 
 
 def run(args) -> int:
+    if args.regimes:
+        from . import bench_regimes
+
+        return bench_regimes.run(args)
     import numpy as np
 
     from .config import load_config
@@ -71,8 +78,8 @@ def run(args) -> int:
         n = len(read_recording(out, raw=False).seq)
     share_sim = (c_sim - c_start) / (w_sim - w_start)
     share_rec = (c_rec - c_start) / (w_rec - w_start)
-    print(f"on disk      : {size / n:8.1f} bytes per 3-channel sample ({n} samples, {size} bytes, raw bytes "
-          f"24/sample included)")
+    print(f"on disk      : {size / n:8.1f} bytes per 3-channel sample ({n} samples, {size} bytes: the serial bytes, "
+          f"events, status and models; {size / n / 40:.2f} x the 40-byte target)")
     print(f"CPU share    : record --sim {100 * share_rec:5.1f} % of one core; device alone (daq sim) "
           f"{100 * share_sim:5.1f} %; recording adds {100 * (share_rec - share_sim):5.1f} % "
           f"(ratio {share_rec / share_sim if share_sim > 0 else np.inf:4.1f}); start-up "

@@ -26,6 +26,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", type=Path, help="MCAP file to write (default rig-YYYYmmdd-HHMMSS.mcap)")
     r.add_argument("--duration", type=float, help="stop after this many seconds of samples")
     r.add_argument("--quiet", action="store_true", help="no live status line")
+    r.add_argument("--accel-json", action="store_true",
+                   help="also one JSON message per sample on /rig/accel, plottable as is in Foxglove and "
+                        "PlotJuggler (about 55 instead of 14 bytes per sample; the serial bytes are kept either way)")
     add_live_options(r, "the recording")
     r.set_defaults(func=record)
     s = sub.add_parser("sim", help="serve the simulated rig on a pty and print its path")
@@ -97,7 +100,7 @@ def record(args) -> int:
         extra = None if args.duration is None else args.duration + 1.0
         thread = threading.Thread(target=server.serve, args=(extra, go), daemon=True)
         thread.start()
-    rec = McapRecorder(out, cfg, port=port)
+    rec = McapRecorder(out, cfg, port=port, accel_json=args.accel_json)
     acq = Acquisition(port, cfg)
     last_status = [time.monotonic()]
     live = None if args.no_identify else LiveProcessing(cfg.daq.rate_hz, args.viewer, out.with_suffix(".rrd"),
@@ -107,11 +110,7 @@ def record(args) -> int:
         rec.write_block(b)
         if live is not None:
             live.submit(b)
-            events, models = live.drain()
-            for e in events:
-                rec.write_event(e)
-            for m in models:
-                rec.write_model(m)
+            live.write_to(rec)
         now = time.monotonic()
         if now - last_status[0] >= 1.0:
             last_status[0] = now
@@ -135,11 +134,7 @@ def record(args) -> int:
     finally:
         if live is not None:
             live.close()
-            events, models = live.drain()
-            for e in events:
-                rec.write_event(e)
-            for m in models:
-                rec.write_model(m)
+            live.write_to(rec)
         rec.write_status(acq.status())
         rec.close()
         if server is not None:
@@ -159,13 +154,6 @@ def record(args) -> int:
     return 0
 
 
-def model_records(fit) -> list[dict]:
-    """One record per beam of a rolling-window fit: the model as a time series entry."""
-    return [{"t": fit.t_s, "beam": i + 1, "equations": b.model.equations(), "coefficients": b.model.as_dict(),
-             "active": list(b.active), "integration_nrmse": b.error, "natural_frequency_hz": b.natural_frequency_hz,
-             "stiffness_per_mass": b.stiffness_per_mass, "changed": b.changed} for i, b in enumerate(fit.beams)]
-
-
 class LiveProcessing:
     """The pipeline beside acquisition, in a worker thread, so a slow model fit never stalls the port.
 
@@ -176,6 +164,7 @@ class LiveProcessing:
 
     def __init__(self, fs_hz: float, viewer_mode: str, rrd_path: Path, events_path: Path | None,
                  window_s: float = 4.0, hop_s: float = 1.0):
+        import collections
         import queue
 
         from ident.live.pipeline import Pipeline, PipelineConfig, rolling_config
@@ -184,6 +173,8 @@ class LiveProcessing:
         from .viewer import RerunViewer
 
         self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, rolling=rolling_config(fs_hz, window_s, hop_s)))
+        self.compile_s = compile_kernels()
+        self.fs_hz = fs_hz
         self.viewer = RerunViewer(viewer_mode, rrd_path=rrd_path, fs_hz=fs_hz)
         self.jsonl = JsonlEvents(events_path) if events_path else None
         self.inq: queue.Queue = queue.Queue()
@@ -192,13 +183,32 @@ class LiveProcessing:
         self.regimes: list[str] = []
         self.busy_s = 0.0
         self.error: str | None = None
+        # device times of the samples submitted (the last ones, enough to reach back over a window):
+        # pipeline times count samples, the recording's log times are device times
+        self._submitted = 0
+        self._device_t: collections.deque = collections.deque()
+        self._keep = int((window_s + 2 * hop_s + 5.0) * fs_hz)
         self.thread = threading.Thread(target=self._work, daemon=True)
         self.thread.start()
 
     def submit(self, block) -> None:
+        self._device_t.append((self._submitted, block.t_device_s))
+        self._submitted += len(block)
+        while self._device_t and self._device_t[0][0] + len(self._device_t[0][1]) < self._submitted - self._keep:
+            self._device_t.popleft()
         self.inq.put((time.monotonic(), block.values))
 
+    def device_time_s(self, t_stream_s: float) -> float | None:
+        """The device time of the last sample before stream time t (samples counted from the start)."""
+        k = int(round(t_stream_s * self.fs_hz)) - 1
+        for start, t_dev in reversed(self._device_t):
+            if start <= k < start + len(t_dev):
+                return float(t_dev[k - start])
+        return None
+
     def _work(self) -> None:
+        from ident.live.pipeline import model_records
+
         from .driver import Event
 
         while True:
@@ -220,7 +230,7 @@ class LiveProcessing:
             if out.fits:
                 self.latencies.append(done - arrived)
             for f in out.fits:
-                self.outq.put(("model", model_records(f)))
+                self.outq.put(("model", f.t_s, model_records(f)))
             for e in out.events:
                 if self.jsonl:
                     self.jsonl.write(e)
@@ -231,16 +241,21 @@ class LiveProcessing:
                 data = {k: v for k, v in e.items() if k not in ("t", "kind")}
                 self.outq.put(Event(e["t"], e["kind"], msg, "info", data))
 
-    def drain(self) -> tuple[list, list]:
-        """(events, per-window model records) produced since the last call."""
-        events, models = [], []
+    def write_to(self, rec) -> None:
+        """Write the events and per-window models produced since the last call to the recorder, stamped
+        with the data time they describe (log_time; publish_time is now)."""
         while not self.outq.empty():
             item = self.outq.get_nowait()
             if isinstance(item, tuple) and item[0] == "model":
-                models += item[1]
+                t_dev = self.device_time_s(item[1])
+                log_ns = rec.log_time_ns(t_dev) if t_dev is not None else None
+                for m in item[2]:
+                    rec.write_model(m, log_ns=log_ns)
+            elif item.kind in ("regime", "model"):
+                t_dev = self.device_time_s(item.t)
+                rec.write_event(item, log_ns=rec.log_time_ns(t_dev) if t_dev is not None else None)
             else:
-                events.append(item)
-        return events, models
+                rec.write_event(item)
 
     def log_event(self, e) -> None:
         if self.jsonl:
@@ -260,7 +275,28 @@ class LiveProcessing:
         p = (f"latency sample -> model update p50 {1e3 * np.percentile(lat, 50):.0f} ms, "
              f"p95 {1e3 * np.percentile(lat, 95):.0f} ms" if lat.size else "no model update")
         return (f"live: {len(self.latencies)} model updates, {len(self.regimes)} regime changes, {p}"
-                + (f"; ERROR {self.error}" if self.error else ""))
+                + (f"; kernels compiled in {self.compile_s:.1f} s before the first sample" if self.compile_s > 1.0
+                   else "") + (f"; ERROR {self.error}" if self.error else ""))
+
+
+def compile_kernels() -> float:
+    """Compile the identification's numba kernels before data flows, so that no window waits for the
+    compiler: from numba's disk cache this takes a moment; the first run after an install compiles for
+    some seconds and says so on a terminal while it does. Seconds taken."""
+    from ident.live.pipeline import warm_up
+    from ident.simulate import kernels_cached
+
+    cold = kernels_cached() is False
+    tell = cold and sys.stderr.isatty()
+    if tell:
+        print("compiling the identification kernels before the first sample (first run after an install; "
+              "numba caches them, so later runs start at once)...", end="", file=sys.stderr, flush=True)
+    t0 = time.monotonic()
+    warm_up()
+    took = time.monotonic() - t0
+    if tell:
+        print(f" compiled in {took:.1f} s", file=sys.stderr, flush=True)
+    return took
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -2,19 +2,28 @@
 
 Channels (JSON schema encoding, readable by Foxglove and PlotJuggler):
 
-- ``/rig/accel`` (``rig.Accel``): one message per frame with scalar fields
-  ``seq``, ``t_device`` [s], ``base``, ``tip1``, ``tip2`` [m/s^2], ``clipped``:
-  every sample, plottable as is. ``log_time`` is the sample's time on the
-  device clock, anchored to the host clock at the first frame;
-  ``publish_time`` is when the host read the bytes that carried it.
 - ``/rig/raw`` (no schema, ``application/octet-stream``): the serial bytes
-  exactly as read, so a recording can be decoded again later; log_time =
-  publish_time = host read time.
+  exactly as read: the record of the samples (about 14 bytes per sample with
+  zstd), decoded again by any reader with the ``calibration`` metadata;
+  log_time = publish_time = host read time.
+- ``/rig/accel`` (``rig.Accel``, only with ``accel_json=True``, ``daq record
+  --accel-json``, and for imported CSVs, which have no serial bytes): one
+  message per frame with scalar fields ``seq``, ``t_device`` [s], ``base``,
+  ``tip1``, ``tip2`` [m/s^2], ``clipped``, plottable as is in Foxglove and
+  PlotJuggler (about 41 more bytes per sample). ``log_time`` is the sample's
+  time on the device clock, anchored to the host clock at the first frame
+  (the anchor is also in the ``samples`` metadata, so readers give
+  raw-decoded samples the same times); ``publish_time`` is when the host read
+  the bytes that carried it.
 - ``/rig/events`` (``foxglove.Log``): drops, CRC failures, disconnects,
   reconnects, regime changes; with our fields ``t`` and ``kind`` added.
 - ``/rig/status`` (``rig.Status``): counters and clock estimates once a second.
 - ``/rig/model`` (``rig.Model``): every rolling window's model per beam: equations,
-  coefficients, active set, integration NRMSE, identified natural frequency.
+  coefficients with their ensemble spread and inclusion probability, active set, integration
+  NRMSE, natural frequency (and spread) and displacement amplitude (the backbone). ``log_time``
+  is the data time of the window's last sample (device clock, anchored as ``/rig/accel``), so
+  models line up with the data they fit; ``publish_time`` is when the model was computed.
+  Regime and model-change events on ``/rig/events`` are stamped the same way.
 
 The resolved config is stored as metadata ``config`` (YAML text) and as the
 attachment ``config.yaml``; the calibration as metadata ``calibration``.
@@ -75,6 +84,11 @@ MODEL_SCHEMA = {
         "natural_frequency_hz": {"type": "number"},
         "stiffness_per_mass": {"type": "number", "description": "1/s^2"},
         "changed": {"type": "boolean", "description": "active set differs from the previous window's"},
+        "coefficient_std": {"type": "object", "description": "per equation and term: spread over the ensemble"},
+        "inclusion_probability": {"type": "object", "description": "per equation and term: share of the "
+                                  "ensemble's models holding the term"},
+        "natural_frequency_std_hz": {"type": "number"},
+        "amplitude_m": {"type": "number", "description": "sqrt(2) RMS relative displacement over the window"},
     },
 }
 LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
@@ -83,7 +97,8 @@ TOPICS = {"accel": "/rig/accel", "raw": "/rig/raw", "events": "/rig/events", "st
 
 
 class McapRecorder:
-    def __init__(self, path: str | Path, config: Config, *, port: str = "", flush_s: float | None = None):
+    def __init__(self, path: str | Path, config: Config, *, port: str = "", flush_s: float | None = None,
+                 accel_json: bool = False):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._fh = open(self.path, "wb")
@@ -92,6 +107,8 @@ class McapRecorder:
         ids = {}
         for key, schema in (("accel", ACCEL_SCHEMA), ("events", LOG_SCHEMA), ("status", STATUS_SCHEMA),
                             ("model", MODEL_SCHEMA)):
+            if key == "accel" and not accel_json:
+                continue  # the samples live in /rig/raw alone
             sid = self._w.register_schema(schema["title"], "jsonschema", json.dumps(schema).encode())
             ids[key] = self._w.register_channel(TOPICS[key], "json", sid)
         ids["raw"] = self._w.register_channel(TOPICS["raw"], "application/octet-stream", 0,
@@ -110,6 +127,7 @@ class McapRecorder:
         self._flush_s = config.daq.flush_s if flush_s is None else flush_s
         self._last_flush = time.monotonic()
         self._anchor_ns: int | None = None  # host epoch ns at device time 0
+        self.accel_json = accel_json
         self._seq = {k: 0 for k in ids}
         self.samples = 0
         self._first_seq: int | None = None
@@ -130,29 +148,36 @@ class McapRecorder:
             return
         if self._anchor_ns is None:
             self._anchor_ns = b.host_ns - int(round(float(b.t_device_s[0]) * 1e9))
-        log_ns = self._anchor_ns + np.rint(b.t_device_s * 1e9).astype(np.int64)
-        v = b.values
-        for i in range(len(b)):
-            msg = (f'{{"seq":{int(b.seq[i])},"t_device":{b.t_device_s[i]:.6f},"base":{v[i, 0]:.6g},'
-                   f'"tip1":{v[i, 1]:.6g},"tip2":{v[i, 2]:.6g},"clipped":{"true" if b.clipped[i] else "false"}}}')
-            self._add("accel", int(log_ns[i]), b.host_ns, msg.encode())
+        if self.accel_json:
+            log_ns = self._anchor_ns + np.rint(b.t_device_s * 1e9).astype(np.int64)
+            v = b.values
+            for i in range(len(b)):
+                msg = (f'{{"seq":{int(b.seq[i])},"t_device":{b.t_device_s[i]:.6f},"base":{v[i, 0]:.6g},'
+                       f'"tip1":{v[i, 1]:.6g},"tip2":{v[i, 2]:.6g},"clipped":{"true" if b.clipped[i] else "false"}}}')
+                self._add("accel", int(log_ns[i]), b.host_ns, msg.encode())
         if self._first_seq is None:
             self._first_seq = int(b.seq[0])
         self._last_seq = int(b.seq[-1])
         self.samples += len(b)
         self._maybe_flush()
 
-    def write_event(self, e: Event, host_ns: int | None = None) -> None:
+    def write_event(self, e: Event, host_ns: int | None = None, log_ns: int | None = None) -> None:
         ns = time.time_ns() if host_ns is None else host_ns
-        msg = {"timestamp": {"sec": ns // 10**9, "nsec": ns % 10**9}, "level": LEVELS.get(e.level, 2),
+        log = ns if log_ns is None else log_ns  # the data time an event describes, where it has one
+        msg = {"timestamp": {"sec": log // 10**9, "nsec": log % 10**9}, "level": LEVELS.get(e.level, 2),
                "message": e.message, "name": "daq", "file": "", "line": 0, "t": e.t, "kind": e.kind, **e.data}
-        self._add("events", ns, ns, json.dumps(msg).encode())
+        self._add("events", log, ns, json.dumps(msg).encode())
 
-    def write_model(self, record: dict) -> None:
-        """One rolling-window model of one beam (the identification's time series)."""
+    def log_time_ns(self, t_device_s: float) -> int | None:
+        """The log time of a sample at this device time (None before the first sample)."""
+        return None if self._anchor_ns is None else self._anchor_ns + int(round(t_device_s * 1e9))
+
+    def write_model(self, record: dict, log_ns: int | None = None) -> None:
+        """One rolling-window model of one beam (the identification's time series), logged at the data
+        time of the window (log_ns) and published now."""
         ns = time.time_ns()
-        clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in record.items()}
-        self._add("model", ns, ns, json.dumps(clean).encode())
+        clean = json.loads(json.dumps(record), parse_constant=lambda c: None)  # NaN and inf as null
+        self._add("model", ns if log_ns is None else log_ns, ns, json.dumps(clean).encode())
 
     def write_status(self, status: dict) -> None:
         ns = time.time_ns()
@@ -174,6 +199,6 @@ class McapRecorder:
         if self._first_seq is not None:
             # the recorded range, so that re-decoding /rig/raw gives exactly the samples of /rig/accel
             self._w.add_metadata("samples", {"first_seq": str(self._first_seq), "last_seq": str(self._last_seq),
-                                             "count": str(self.samples)})
+                                             "count": str(self.samples), "anchor_ns": str(self._anchor_ns)})
         self._w.finish()
         self._fh.close()

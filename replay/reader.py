@@ -1,4 +1,10 @@
-"""Read a recording of this tool (MCAP) into arrays: samples, raw bytes, events, status, config."""
+"""Read a recording of this tool (MCAP) into arrays: samples, raw bytes, events, status, config.
+
+The samples come from ``/rig/accel`` (one JSON message per frame) where the recording has it, else
+from decoding the serial bytes of ``/rig/raw`` with the ``calibration`` metadata (recordings since
+the compact layout keep only those): the recorded range from the ``samples`` metadata, log times
+from its device-clock anchor, publish times from the raw messages that completed each frame.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +16,7 @@ import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
+from daq.protocol import FLAG_CLIPPED, Decoder
 from daq.recorder import TOPICS
 
 
@@ -62,8 +69,8 @@ def read_recording(path: str | Path, raw: bool = True) -> Recording:
                     clip.append(d.get("clipped", False))
                     lt.append(message.log_time)
                     pt.append(message.publish_time)
-                elif topic == TOPICS["raw"] and raw:
-                    raws.append(message.data)
+                elif topic == TOPICS["raw"]:
+                    raws.append((message.data, message.log_time))
                 elif topic == TOPICS["events"]:
                     events.append(json.loads(message.data))
                 elif topic == TOPICS["status"]:
@@ -75,6 +82,45 @@ def read_recording(path: str | Path, raw: bool = True) -> Recording:
         except (McapError, ValueError, EOFError, KeyError) as exc:
             raise ValueError(f"{path}: not a readable recording ({type(exc).__name__}: {exc}); "
                              f"if it was cut short, run: replay recover {path} -o FIXED.mcap") from None
+    raw_bytes = b"".join(r[0] for r in raws) if raw else b""
+    if not seq and raws and "calibration" in meta:
+        return Recording(path, *samples_from_raw(raws, meta), raw_bytes, events, status, models,
+                         meta.get("config", {}).get("yaml", ""), meta)
     return Recording(path, np.array(seq, np.int64), np.array(t, float), np.array(vals, float).reshape(-1, 3),
-                     np.array(clip, bool), np.array(lt, np.int64), np.array(pt, np.int64), b"".join(raws),
+                     np.array(clip, bool), np.array(lt, np.int64), np.array(pt, np.int64), raw_bytes,
                      events, status, models, meta.get("config", {}).get("yaml", ""), meta)
+
+
+def samples_from_raw(raws: list[tuple[bytes, int]], meta: dict[str, dict[str, str]]):
+    """(seq, t_device, values, clipped, log_time_ns, publish_time_ns) decoded from the raw messages."""
+    dec = Decoder()
+    parts = []
+    for data, host_ns in raws:
+        fr = dec.feed(data)
+        if len(fr):
+            parts.append((fr, np.full(len(fr), host_ns, np.int64)))
+    if not parts:
+        z = np.zeros(0)
+        return z.astype(np.int64), z, np.zeros((0, 3)), z.astype(bool), z.astype(np.int64), z.astype(np.int64)
+    seq = np.concatenate([p[0].seq for p in parts]).astype(np.int64)
+    seq = seq + (np.cumsum(np.diff(seq, prepend=seq[:1]) < -(2**31)) << 32)  # 32-bit wrap-around
+    t_us = np.concatenate([p[0].t_us for p in parts])
+    counts = np.concatenate([p[0].counts for p in parts]).astype(np.float64)
+    flags = np.concatenate([p[0].flags for p in parts])
+    pub = np.concatenate([p[1] for p in parts])
+    keep = np.ones(len(seq), bool)
+    span = meta.get("samples")
+    if span:
+        keep = (seq >= int(span["first_seq"])) & (seq <= int(span["last_seq"]))
+    cal = meta["calibration"]
+    names = ("base", "tip1", "tip2")
+    scale = np.array([float(cal[f"{c}.scale_m_per_s2_per_count"]) for c in names])
+    offset = np.array([float(cal[f"{c}.offset_m_per_s2"]) for c in names])
+    t_dev = t_us[keep].astype(np.float64) * 1e-6
+    anchor = span.get("anchor_ns") if span else None
+    if anchor is None or anchor == "None":  # a recovered file has no closing metadata: anchor at the first read
+        anchor_ns = int(pub[keep][0] - round(t_dev[0] * 1e9)) if keep.any() else 0
+    else:
+        anchor_ns = int(anchor)
+    log = anchor_ns + np.rint(t_dev * 1e9).astype(np.int64)
+    return (seq[keep], t_dev, counts[keep] * scale + offset, (flags[keep] & FLAG_CLIPPED) != 0, log, pub[keep])

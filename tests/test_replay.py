@@ -46,6 +46,25 @@ def test_fast_raw_path_equals_the_json_samples():
     assert read_mcap(REC / "transitions.mcap").fs_hz == pytest.approx(1000.0)
 
 
+def test_old_recordings_json_samples_equal_their_raw_bytes_decoded():
+    """Recordings before the compact layout carry one JSON message per sample beside the serial bytes; the
+    raw decode (the only record in new recordings) gives the same samples, flags and log times."""
+    from mcap.reader import make_reader
+
+    from replay.reader import samples_from_raw
+
+    f = REC / "localized-1.mcap"
+    rec = read_recording(f, raw=False)
+    with open(f, "rb") as fh:
+        raws = [(m.data, m.log_time) for _, _, m in make_reader(fh).iter_messages(topics=["/rig/raw"])]
+    seq, t_dev, values, clipped, log_ns, pub_ns = samples_from_raw(raws, rec.metadata)
+    assert np.array_equal(seq, rec.seq) and len(seq) == 20000
+    np.testing.assert_allclose(t_dev, rec.t_device, atol=1e-6)  # JSON keeps microseconds
+    np.testing.assert_allclose(values, rec.values, atol=1e-5, rtol=1e-5)  # JSON keeps 6 digits
+    assert np.array_equal(clipped, rec.clipped)
+    assert np.array_equal(log_ns, rec.log_time_ns) and np.array_equal(pub_ns, rec.publish_time_ns)
+
+
 @pytest.mark.parametrize("name,regime", [("linear", None), ("localized-1", "localized-1"),
                                          ("localized-2", "localized-2"),
                                          ("impacting-both", "impacting-both")])
