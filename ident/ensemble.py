@@ -87,23 +87,27 @@ def model_thresholds(theta: np.ndarray, coefficients: np.ndarray, fallback: floa
 
 
 def _batched_stlsq(a: np.ndarray, c: np.ndarray, threshold: np.ndarray, max_iter: int) -> np.ndarray:
-    """STLSQ on normal equations a xi = c for a batch: a (B, K, K), c (B, K, n) -> xi (B, K, n)."""
+    """STLSQ on normal equations a xi = c for a batch: a (B, K, K), c (B, K, n) -> xi (B, K, n).
+
+    Every model and equation is one small system; inactive terms are pinned to zero by replacing their
+    rows and columns with the identity, so each iteration is one batched solve.
+    """
     bsz, k, n = c.shape
     eye = np.eye(k)
     # a tiny ridge against exactly collinear columns (a single tone makes z, v and F nearly so)
     a = a + 1e-12 * np.trace(a, axis1=1, axis2=2)[:, None, None] * eye
-    active = np.ones((bsz, k, n), bool)
-    xi = np.zeros((bsz, k, n))
+    aa = np.repeat(a[:, None], n, axis=1).reshape(bsz * n, k, k)  # (B n, K, K): model b, equation e
+    cc = np.moveaxis(c, 2, 1).reshape(bsz * n, k)
+    thr = np.tile(np.asarray(threshold, float), bsz)[:, None]
+    active = np.ones((bsz * n, k), bool)
+    xi = np.zeros((bsz * n, k))
     for _ in range(max_iter):
-        for e in range(n):
-            m = active[:, :, e]
-            mm = m[:, :, None] & m[:, None, :]
-            sys = np.where(mm, a, 0.0) + np.where(m, 0.0, 1.0)[:, :, None] * eye
-            rhs = np.where(m, c[:, :, e], 0.0)
-            xi[:, :, e] = np.linalg.solve(sys, rhs[:, :, None])[:, :, 0]
-        new = active & (np.abs(xi) >= threshold[None, None, :])
+        mm = active[:, :, None] & active[:, None, :]
+        sys = np.where(mm, aa, 0.0) + (~active)[:, :, None] * eye
+        xi = np.linalg.solve(sys, np.where(active, cc, 0.0)[:, :, None])[:, :, 0]
+        new = active & (np.abs(xi) >= thr)
         xi[~new] = 0.0
         if np.array_equal(new, active):
             break
         active = new
-    return xi
+    return np.moveaxis(xi.reshape(bsz, n, k), 1, 2)

@@ -53,6 +53,7 @@ stream into blocks gives the same output (tests/test_regimes.py proves it).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -233,17 +234,24 @@ class _Spectral:
     power_scale: float  # one-sided power in (m/s^2)^2 per unit of summed bins
 
 
+@lru_cache(maxsize=16)
+def _window_arrays(n: int, fs_hz: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Hann window, sample times and the window's power normalisation, per window length and rate."""
+    w = np.hanning(n)
+    return w, np.arange(n) / fs_hz, float(np.sum(w**2))
+
+
 def spectral_features(x: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) -> _Spectral:
     """Drive frequency, phasors and band powers of one window (n, 3)."""
     n = len(x)
+    w, t, w2 = _window_arrays(n, float(fs_hz))
     x = x - x.mean(axis=0)
-    w = np.hanning(n)
+    xw = x * w[:, None]
     pad = 4
     nfft = pad * n
-    spec = np.fft.rfft(x * w[:, None], nfft, axis=0)
+    spec = np.fft.rfft(xw, nfft, axis=0)
     p = spec.real**2 + spec.imag**2
     df = fs_hz / nfft
-    freqs = np.arange(p.shape[0]) * df
     top = 0.3 * fs_hz
     lo = int(np.ceil(min_frequency_hz / df))
     hi = max(lo + 1, int(top / df))
@@ -255,20 +263,27 @@ def spectral_features(x: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0
         if den < 0:
             delta = 0.5 * (a - c) / den
     f = float((k + delta) * df)
-    t = np.arange(n) / fs_hz
-    phasors = 2 * ((x * w[:, None]).T @ np.exp(-2j * np.pi * f * t)) / w.sum()
-    fund = (freqs >= 0.5 * f) & (freqs < 1.5 * f)
-    harm = (freqs >= 1.5 * f) & (freqs < min(10.5 * f, top))
-    imp = (freqs >= 10.5 * f) & (freqs < top)
-    odd = np.zeros(len(freqs), bool)
+    phasors = 2 * (xw.T @ np.exp(-2j * np.pi * f * t)) / w.sum()
+
+    def index(freq_hz: float) -> int:  # first bin at or above freq_hz
+        return min(p.shape[0], int(np.ceil(freq_hz / df - 1e-9)))
+
+    i_f, i_h, i_i, i_top = index(0.5 * f), index(1.5 * f), index(min(10.5 * f, top)), index(top)
+    i_i = max(i_h, i_i)
+    fund = p[i_f:i_h].sum(axis=0)
+    harm = p[i_h:i_i].sum(axis=0)
+    imp = p[i_i:i_top].sum(axis=0)
+    odd = np.zeros(3)
+    n_odd = 0
     for m in (3, 5):
-        odd |= np.abs(freqs - m * f) < 0.25 * f
-    odd &= harm
-    band = harm | imp
-    floor = _low_quantile(p[band], FLOOR_QUANTILE) / -np.log(1 - FLOOR_QUANTILE) if band.any() else np.zeros(3)
-    scale = 2.0 / (n * np.sum(w**2) * pad)
-    return _Spectral(f, phasors, p[fund].sum(axis=0), p[harm].sum(axis=0), p[odd].sum(axis=0), p[imp].sum(axis=0),
-                     (int(harm.sum()), int(odd.sum()), int(imp.sum())), floor, scale)
+        a0, a1 = max(index((m - 0.25) * f), i_h), min(index((m + 0.25) * f), i_i)
+        if a1 > a0:
+            odd += p[a0:a1].sum(axis=0)
+            n_odd += a1 - a0
+    band = p[i_h:i_top]
+    floor = _low_quantile(band, FLOOR_QUANTILE) / -np.log(1 - FLOOR_QUANTILE) if len(band) else np.zeros(3)
+    scale = 2.0 / (n * w2 * pad)
+    return _Spectral(f, phasors, fund, harm, odd, imp, (i_i - i_h, n_odd, i_top - i_i), floor, scale)
 
 
 def _low_quantile(a: np.ndarray, q: float) -> np.ndarray:
@@ -340,7 +355,7 @@ def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeStat
         else:
             gap, e_a = _gap_evidence(z, free_z[i], hit_z[i], cfg)
         # evidence 3: stiffness against the free beam's (reported; not weighed: coupling and beating move it)
-        f_free = float(np.median(free_w[i])) / (2 * np.pi) if len(free_w[i]) >= 8 else float("nan")
+        f_free = float(_low_quantile(free_w[i], 0.5)) / (2 * np.pi) if len(free_w[i]) >= 8 else float("nan")
         e_k = 0.0
         score = cfg.prior + e_d + e_a + e_k
         p = _logistic(score)
@@ -384,8 +399,8 @@ def _gap_evidence(z: float, free: np.ndarray, hit: np.ndarray, cfg: RegimeConfig
     """
     if z <= 0:
         return float("nan"), -LEARNED_CAP
-    hi = float(np.quantile(hit, 0.05)) if len(hit) >= 8 else float("nan")
-    lo = float(np.quantile(free, 0.95)) if len(free) >= 8 else float("nan")
+    hi = float(_low_quantile(hit, 0.05)) if len(hit) >= 8 else float("nan")
+    lo = float(_low_quantile(free, 0.95)) if len(free) >= 8 else float("nan")
     if np.isfinite(hi) and np.isfinite(lo) and lo < hi:
         gap = float(np.sqrt(lo * hi))
         spread = max(cfg.gap_scale, 0.5 * float(np.log(hi / lo)))
