@@ -207,39 +207,49 @@ class LiveProcessing:
         return None
 
     def _work(self) -> None:
+        last_window = -1.0
+        while True:
+            item = self.inq.get()
+            if item is None:
+                self._handle(self.pipe.finish())  # the last window's refined fit
+                return
+            arrived, values = item
+            t0 = time.monotonic()
+            out = self._handle(self.pipe.step, values)
+            if out is None:
+                continue
+            done = time.monotonic()
+            self.busy_s += done - t0
+            if out.fits and out.fits[-1].t_s > last_window:  # a window's first model update (refits follow)
+                last_window = out.fits[-1].t_s
+                self.latencies.append(done - arrived)
+
+    def _handle(self, step, *args):
+        """Run a pipeline step (or take its output), show it, queue its models and events for the recorder."""
         from ident.live.pipeline import model_records
 
         from .driver import Event
 
-        while True:
-            item = self.inq.get()
-            if item is None:
-                return
-            arrived, values = item
-            t0 = time.monotonic()
-            try:
-                out = self.pipe.step(values)
-                self.viewer.log_step(out)
-            except Exception as exc:  # noqa: BLE001 - processing must never stop the recording
-                if self.error is None:
-                    self.error = f"{type(exc).__name__}: {exc}"
-                    self.outq.put(Event(0.0, "error", f"live processing stopped: {self.error}", "error"))
-                continue
-            done = time.monotonic()
-            self.busy_s += done - t0
-            if out.fits:
-                self.latencies.append(done - arrived)
-            for f in out.fits:
-                self.outq.put(("model", f.t_s, model_records(f)))
-            for e in out.events:
-                if self.jsonl:
-                    self.jsonl.write(e)
-                if e["kind"] == "regime":
-                    self.regimes.append(e["regime"])
-                msg = (f"regime {e['regime']} (was {e['previous']})" if e["kind"] == "regime"
-                       else f"beam {e.get('beam')} model changed: " + "; ".join(e.get("equations", [])))
-                data = {k: v for k, v in e.items() if k not in ("t", "kind")}
-                self.outq.put(Event(e["t"], e["kind"], msg, "info", data))
+        try:
+            out = step(*args) if args else step
+            self.viewer.log_step(out)
+        except Exception as exc:  # noqa: BLE001 - processing must never stop the recording
+            if self.error is None:
+                self.error = f"{type(exc).__name__}: {exc}"
+                self.outq.put(Event(0.0, "error", f"live processing stopped: {self.error}", "error"))
+            return None
+        for f in out.fits:
+            self.outq.put(("model", f.t_s, model_records(f)))
+        for e in out.events:
+            if self.jsonl:
+                self.jsonl.write(e)
+            if e["kind"] == "regime":
+                self.regimes.append(e["regime"])
+            msg = (f"regime {e['regime']} (was {e['previous']})" if e["kind"] == "regime"
+                   else f"beam {e.get('beam')} model changed: " + "; ".join(e.get("equations", [])))
+            data = {k: v for k, v in e.items() if k not in ("t", "kind")}
+            self.outq.put(Event(e["t"], e["kind"], msg, "info", data))
+        return out
 
     def write_to(self, rec) -> None:
         """Write the events and per-window models produced since the last call to the recorder, stamped

@@ -65,5 +65,8 @@ def play(samples: Samples, *, rate: float | None = 1.0, start_s: float = 0.0, du
         offset = rep.stream_s
         if not loop or (max_loops is not None and rep.loops >= max_loops):
             break
+    out = pipe.finish()  # the last window's refined fit
+    if on_step is not None:
+        on_step(out)
     rep.wall_s = time.monotonic() - wall0
     return rep

@@ -65,7 +65,8 @@ def model_records(fit: WindowFit) -> list[dict]:
     ``t`` is the window's end in data time (seconds since the start of the stream); ``coefficients``
     the model's non-zero terms; ``coefficient_std`` and ``inclusion_probability`` the ensemble's spread
     and the share of its models holding each term (every term some model holds); ``amplitude_m`` and
-    ``natural_frequency_hz`` are the window's point on the beam's backbone.
+    ``natural_frequency_hz`` are the window's point on the beam's backbone. A window that needed a new
+    model has two records: the sweep's (``final`` false) and the refined one that follows.
     """
     out = []
     for i, b in enumerate(fit.beams):
@@ -77,7 +78,7 @@ def model_records(fit: WindowFit) -> list[dict]:
                     "active": list(b.active), "integration_nrmse": b.error,
                     "natural_frequency_hz": b.natural_frequency_hz,
                     "natural_frequency_std_hz": b.natural_frequency_std_hz, "amplitude_m": b.amplitude_m,
-                    "stiffness_per_mass": b.stiffness_per_mass, "changed": b.changed})
+                    "stiffness_per_mass": b.stiffness_per_mass, "changed": b.changed, "final": fit.final})
     return out
 
 
@@ -123,7 +124,17 @@ class Pipeline:
         rel = y[:, 1:] - y[:, :1]
         windows, changes = self.monitor.step(x)
         fits = self.rolling.step(x) if self.rolling is not None else []
-        events = [{"t": c.t_s, "kind": "regime", "regime": c.regime, "previous": c.previous} for c in changes]
+        return self._output(t, x, y, rel, windows, changes, fits)
+
+    def finish(self) -> StepOutput:
+        """At the end of a stream: what is still pending (the last window's refined fit, if any)."""
+        fits = self.rolling.finish() if self.rolling is not None else []
+        e = np.zeros((0, 3))
+        return self._output(np.zeros(0), e, e, np.zeros((0, 2)), [], [], fits)
+
+    def _output(self, t, x, y, rel, windows, changes, fits) -> StepOutput:
+        events = [{"t": c.t_s, "kind": "regime", "regime": c.regime, "previous": c.previous,
+                   "confidence": c.confidence} for c in changes]
         for f in fits:
             for i, b in enumerate(f.beams):
                 if b.changed:
