@@ -52,6 +52,8 @@ def add_live_options(p, beside: str) -> None:
     p.add_argument("--no-identify", action="store_true", help="no rolling SINDy (filters and regimes only)")
     p.add_argument("--window", type=float, default=4.0, help="rolling SINDy window [s] (default 4)")
     p.add_argument("--hop", type=float, default=1.0, help="rolling SINDy hop [s] (default 1)")
+    p.add_argument("--gaps", metavar="G1,G2", help="the tips' stopper gaps [m] for the regime monitor "
+                   "(default: learned from the data)")
 
 
 def _check_duration(d: float | None) -> None:
@@ -104,7 +106,7 @@ def record(args) -> int:
     acq = Acquisition(port, cfg)
     last_status = [time.monotonic()]
     live = None if args.no_identify else LiveProcessing(cfg.daq.rate_hz, args.viewer, out.with_suffix(".rrd"),
-                                                         args.events, args.window, args.hop)
+                                                         args.events, args.window, args.hop, args.gaps)
 
     def on_block(b):
         rec.write_block(b)
@@ -163,16 +165,18 @@ class LiveProcessing:
     """
 
     def __init__(self, fs_hz: float, viewer_mode: str, rrd_path: Path, events_path: Path | None,
-                 window_s: float = 4.0, hop_s: float = 1.0):
+                 window_s: float = 4.0, hop_s: float = 1.0, gaps: str | None = None):
         import collections
         import queue
 
-        from ident.live.pipeline import Pipeline, PipelineConfig, rolling_config
+        from ident.live.pipeline import Pipeline, PipelineConfig, parse_gaps, rolling_config
+        from ident.live.regimes import RegimeConfig
 
         from .eventlog import JsonlEvents
         from .viewer import RerunViewer
 
-        self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, rolling=rolling_config(fs_hz, window_s, hop_s)))
+        self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, rolling=rolling_config(fs_hz, window_s, hop_s),
+                                            regime=RegimeConfig(fs_hz=fs_hz, gap_m=parse_gaps(gaps))))
         self.compile_s = compile_kernels()
         self.fs_hz = fs_hz
         self.viewer = RerunViewer(viewer_mode, rrd_path=rrd_path, fs_hz=fs_hz)

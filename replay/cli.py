@@ -79,7 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
 def play_cmd(args) -> int:
     from daq.cli import compile_kernels
     from daq.eventlog import JsonlEvents
-    from ident.live.pipeline import model_records
+    from ident.live.pipeline import model_records, parse_gaps
     from daq.viewer import RerunViewer
 
     from .play import play
@@ -113,10 +113,11 @@ def play_cmd(args) -> int:
                 print(f"{e['t']:9.2f} s  regime {e['regime']}", flush=True)
 
     compile_s = 0.0 if args.no_identify else compile_kernels()  # before the clock starts: no window waits for it
+    cpu0 = time.process_time()
     try:
         rep = play(samples, rate=None if args.max else args.rate, start_s=args.start, duration_s=args.duration,
                    loop=args.loop, identify=not args.no_identify, on_step=on_step, stop=lambda: stopped[0],
-                   window_s=args.window, hop_s=args.hop)
+                   window_s=args.window, hop_s=args.hop, gaps=parse_gaps(args.gaps))
     finally:
         viewer.close()
         if events:
@@ -124,7 +125,9 @@ def play_cmd(args) -> int:
         if models:
             models.close()
     speed = rep.stream_s / rep.wall_s if rep.wall_s > 0 else float("inf")
-    print(f"played {rep.stream_s:.2f} s of data in {rep.wall_s:.2f} s ({speed:.1f} x real time); events: "
+    cpu = time.process_time() - cpu0
+    print(f"played {rep.stream_s:.2f} s of data in {rep.wall_s:.2f} s ({speed:.1f} x real time; CPU {cpu:.2f} s, "
+          f"{rep.stream_s / cpu if cpu > 0 else float('inf'):.1f} x); events: "
           + (", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "none")
           + (f"; viewer saved to {rrd}" if args.viewer == "save" else "")
           + (f"; kernels compiled in {compile_s:.1f} s before playing" if compile_s > 1.0 else ""))

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ident.live.pipeline import Pipeline, PipelineConfig, StepOutput, rolling_config
+from ident.live.regimes import RegimeConfig
 
 from .sources import Samples
 
@@ -30,11 +31,12 @@ class PlayReport:
 def play(samples: Samples, *, rate: float | None = 1.0, start_s: float = 0.0, duration_s: float | None = None,
          loop: bool = False, identify: bool = True, on_step: Callable[[StepOutput], None] | None = None,
          stop: Callable[[], bool] | None = None, max_loops: int | None = None, window_s: float = 4.0,
-         hop_s: float = 1.0) -> PlayReport:
+         hop_s: float = 1.0, gaps: tuple[float, float] | None = None) -> PlayReport:
     if rate is not None and not rate > 0:
         raise ValueError(f"--rate must be positive, got {rate}")
     pipe = Pipeline(PipelineConfig(fs_hz=samples.fs_hz, identify=identify,
-                                   rolling=rolling_config(samples.fs_hz, window_s, hop_s)))
+                                   rolling=rolling_config(samples.fs_hz, window_s, hop_s),
+                                   regime=RegimeConfig(fs_hz=samples.fs_hz, gap_m=gaps)))
     rep = PlayReport()
     wall0 = time.monotonic()
     offset = 0.0  # stream time already played in earlier loops

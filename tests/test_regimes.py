@@ -149,16 +149,19 @@ def scored(case, x=None, gaps=None):
     return sc, windows
 
 
-# seed: (share of windows right at least, true changes reported within 1 s, false changes at most); measured
-GENERATED = {4: (0.99, 5, 1), 11: (0.75, 6, 4), 2: (0.95, 6, 4)}
+# The three seeds that generate fastest (10 s segments), as measured: seed: (share of windows right,
+# true changes, of them reported within 1 s, false changes). Seed 11 starts with beam 1 grazing a soft
+# one-sided stopper (2 % beyond its gap, 5 x the beam's stiffness) while beam 2 hits hard: the monitor
+# calls it localized-2 until the grazing beam hits properly (daq bench --regimes has the whole picture).
+GENERATED = {4: (1.0, 5, 5, 1), 11: (0.81, 7, 6, 4), 2: (1.0, 7, 7, 0)}
 
 
 @pytest.mark.parametrize("seed", list(GENERATED))
 def test_regimes_on_the_independent_generator(generated, seed):
     case = generated[seed]
-    share, in_time, false = GENERATED[seed]
+    share, changes, in_time, false = GENERATED[seed]
     sc, _ = scored(case)
-    assert len(sc.true_changes) >= 4  # the programme went through the regimes
+    assert len(sc.true_changes) == changes  # the programme went through the regimes
     assert sc.share_right >= share, sc
     assert sc.changes_in_time >= in_time, sc
     assert sc.false_changes <= false, sc

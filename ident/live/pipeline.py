@@ -99,6 +99,19 @@ def warm_up() -> None:
     simulate(lib, np.repeat(coefs[None], n_batch, axis=0), np.zeros(2), t, np.zeros_like(t))
 
 
+def parse_gaps(text: str | None) -> tuple[float, float] | None:
+    """--gaps G1,G2: the tips' stopper gaps in metres for the regime monitor (None: it learns them)."""
+    if text is None:
+        return None
+    try:
+        gaps = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"--gaps takes two gaps in metres, as 0.0027,0.0027; got {text!r}") from None
+    if len(gaps) != 2 or not all(np.isfinite(g) and g > 0 for g in gaps):
+        raise ValueError(f"--gaps takes two positive gaps in metres (tip 1, tip 2), as 0.0027,0.0027; got {text!r}")
+    return gaps
+
+
 class Pipeline:
     def __init__(self, cfg: PipelineConfig = PipelineConfig()):
         if cfg.regime.fs_hz != cfg.fs_hz or cfg.rolling.fs_hz != cfg.fs_hz:

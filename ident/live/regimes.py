@@ -20,9 +20,12 @@ spectral peak) and a Hann-windowed spectrum of every channel:
   only where the excess is significant against the floor (a beam that barely moves
   says nothing either way);
 - **displacement amplitude against the gap**: the relative displacement at the drive
-  frequency, Z = |tip - base| / (2 pi f)^2 at f, against the stopper gap of the tip
-  (``gap_m`` from the config, else learned online: between the largest amplitudes the
-  distortion called free and the smallest it called hitting);
+  frequency, Z = |tip - base| / (2 pi f)^2 at f, against the stopper gap learned online
+  (between the largest amplitudes the distortion called free and the smallest it called
+  hitting; far below every amplitude seen hitting a beam is free); with the gap from the
+  config (``gap_m``), the peak of the displacement waveform rebuilt from the first eight
+  harmonics (a stopper clips the motion: the fundamental of a beam on a stiff stopper stays
+  below the gap);
 - **stiffness**: harmonic balance of the beam's first mode at the drive frequency,
   z'' + 2 zeta w z' + w^2 z = -a_base gives w_eq^2 = w^2 Re(T / R), T the tip's and R the
   relative acceleration phasor: the describing-function (equivalent linear) natural
@@ -58,6 +61,7 @@ from functools import lru_cache
 import numpy as np
 
 LABELS = ("linear", "localized-1", "localized-2", "impacting-both")
+PEAK_HARMONICS = 8  # harmonics of the drive in the reconstructed displacement waveform
 LEARNED_CAP = 1.5  # largest log-odds a learned gap may give
 LEARN_WINDOWS = 400  # confident windows kept per beam for the learned gap and stiffness (100 s at 0.25 s)
 FLOOR_QUANTILE = 0.2
@@ -97,6 +101,7 @@ class BeamState:
     probability: float  # of hitting, this window
     confidence: float  # max(p, 1 - p)
     displacement_m: float  # relative displacement amplitude at the drive frequency
+    peak_displacement_m: float  # peak of the relative displacement waveform (harmonics 1-8 of the drive)
     gap_m: float  # from the config, or learned (nan until learned)
     distortion: float  # harmonic-band power over the fundamental's, floor and base removed
     odd_distortion: float  # the part at 3 f and 5 f
@@ -225,6 +230,7 @@ class RegimeMonitor:
 class _Spectral:
     f_hz: float
     phasors: np.ndarray  # (3,) complex amplitudes at f
+    harmonics: np.ndarray  # (H, 3) complex amplitudes at n f, n = 1 .. H (H = PEAK_HARMONICS, below 0.45 fs)
     fundamental: np.ndarray  # (3,) power in [0.5 f, 1.5 f]
     harmonic: np.ndarray  # (3,) power in [1.5 f, 10.5 f] (distortion)
     odd: np.ndarray  # (3,) power within f / 4 of 3 f and 5 f
@@ -263,7 +269,11 @@ def spectral_features(x: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0
         if den < 0:
             delta = 0.5 * (a - c) / den
     f = float((k + delta) * df)
-    phasors = 2 * (xw.T @ np.exp(-2j * np.pi * f * t)) / w.sum()
+    e1 = np.exp(-2j * np.pi * f * t)
+    n_h = max(1, min(PEAK_HARMONICS, int(0.45 * fs_hz / f))) if f > 0 else 1
+    basis = np.cumprod(np.repeat(e1[:, None], n_h, axis=1), axis=1)  # exp(-2 pi i n f t), n = 1 .. H
+    harmonics = 2 * (basis.T @ xw) / w.sum()
+    phasors = harmonics[0]
 
     def index(freq_hz: float) -> int:  # first bin at or above freq_hz
         return min(p.shape[0], int(np.ceil(freq_hz / df - 1e-9)))
@@ -283,7 +293,7 @@ def spectral_features(x: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0
     band = p[i_h:i_top]
     floor = _low_quantile(band, FLOOR_QUANTILE) / -np.log(1 - FLOOR_QUANTILE) if len(band) else np.zeros(3)
     scale = 2.0 / (n * w2 * pad)
-    return _Spectral(f, phasors, fund, harm, odd, imp, (i_i - i_h, n_odd, i_top - i_i), floor, scale)
+    return _Spectral(f, phasors, harmonics, fund, harm, odd, imp, (i_i - i_h, n_odd, i_top - i_i), floor, scale)
 
 
 def _low_quantile(a: np.ndarray, q: float) -> np.ndarray:
@@ -348,10 +358,11 @@ def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeStat
         e_d = max(e_h, e_i)
         significant = sig_h or sig_i
         distortion = max(d_h, 0.0) + max(d_i, 0.0)
+        peak = _peak_displacement(signs[i] * sp.harmonics[:, j] - sp.harmonics[:, 0], omega)
         # evidence 2: amplitude against the gap
-        if cfg.gap_m is not None:
+        if cfg.gap_m is not None:  # the waveform's peak (a stopper clips it: its fundamental stays below the gap)
             gap = float(cfg.gap_m[i])
-            e_a = float(np.clip(np.log(z / gap) / cfg.gap_scale, -3, 3)) if z > 0 else -3.0
+            e_a = float(np.clip(np.log(peak / gap) / cfg.gap_scale, -2.0, 3.0)) if peak > 0 else -2.0
         else:
             gap, e_a = _gap_evidence(z, free_z[i], hit_z[i], cfg)
         # evidence 3: stiffness against the free beam's (reported; not weighed: coupling and beating move it)
@@ -371,7 +382,7 @@ def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeStat
             if np.isfinite(fn):
                 free_w[i] = np.append(free_w[i], 2 * np.pi * fn)[-LEARN_WINDOWS:]
         impact_rms = float(np.sqrt(max(d_i, 0.0) * fund * sp.power_scale))
-        beams.append(BeamState(hit, p, max(p, 1 - p), z, gap, distortion, odd, max(d_i, 0.0), significant, fn,
+        beams.append(BeamState(hit, p, max(p, 1 - p), z, peak, gap, distortion, odd, max(d_i, 0.0), significant, fn,
                                f_free, phase, signs[i], (e_d, e_a, e_k), impact_rms))
     raw = label_of(*hits)
     cand, count = (raw, state.candidate_count + 1) if raw == state.candidate else (raw, 1)
@@ -388,6 +399,17 @@ def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeStat
                     free_w=tuple(free_w), hit=(hits[0], hits[1]), label=label, candidate=cand,
                     candidate_count=count, started=True)
     return state, window, change
+
+
+def _peak_displacement(rel_acc: np.ndarray, omega: float) -> float:
+    """Peak |z| over a period of the displacement whose acceleration harmonics are rel_acc (phasors at n w):
+    z_n = -a_n / (n w)^2, evaluated on 128 phases."""
+    if not omega > 0:
+        return 0.0
+    n = np.arange(1, len(rel_acc) + 1)
+    zn = -rel_acc / (n * omega) ** 2
+    theta = np.linspace(0.0, 2 * np.pi, 128, endpoint=False)
+    return float(np.max(np.abs(np.real(np.exp(1j * np.outer(theta, n)) @ zn))))
 
 
 def _gap_evidence(z: float, free: np.ndarray, hit: np.ndarray, cfg: RegimeConfig) -> tuple[float, float]:
