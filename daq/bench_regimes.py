@@ -153,8 +153,9 @@ def _summary(rows: list[dict], key: str = "") -> str:
     steady_false = sum(r[f"{key}steady_false"] for r in rows)
     with_false = sum(1 for r in rows if r[f"{key}steady_false"] > 0)
     worst = min((r[f"{key}right"] / r[f"{key}windows"] for r in rows if r[f"{key}windows"]), default=float("nan"))
+    steady_right = float(np.mean([r[f"{key}steady_right"] for r in rows]))
     return (f"{100 * right / max(w, 1):5.1f} % ({100 * worst:5.1f} worst) | {intime:3d}/{ch:3d} | {false:3d} | "
-            f"{steady_false:3d} in {with_false}/{len(rows)} seeds")
+            f"{steady_false:3d} in {with_false}/{len(rows)} seeds | {100 * steady_right:5.1f} %")
 
 
 def run(args) -> int:
@@ -202,7 +203,7 @@ def run(args) -> int:
                  if args.config_gaps else "") + f"   [{t_gen:.0f} s]", flush=True)
     print()
     print("range                        | windows right (worst seed) | changes <= 1 s | false changes in "
-          "regime runs | false changes in steady runs")
+          "regime runs | false changes in steady runs | steady windows right (mean over seeds)")
     for title, key, bins in BINS:
         for b in bins:
             sel = [r for r in rows if _in_bin(r[key], b)]
