@@ -1,7 +1,7 @@
 """Discovery end to end: hidden effects found, nothing found where nothing is hidden, the command line.
 
-Data from this project's own rig model (``daq.sim.hidden``, the easy test) and from the independent
-generator (``daq.sim.independent``, written apart from ``ident``) are both used; the benchmark
+Data here from this project's own rig model (``daq.sim.hidden``, the easy test: the baseline is that very
+model); the independent generator's cases are in ``test_discovery_independent.py``; the benchmark
 (``ident bench discovery``) runs many more seeds of each.
 """
 

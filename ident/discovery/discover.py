@@ -30,6 +30,7 @@ from .split import Split, blocks_reached, given, interleaved, transients
 
 
 PIECE_PERIODS = 5  # periods of the slowest mode per piece of the paired test
+BLOCK_PERIODS = 4.0  # periods of the slowest mode per block (the band's low edge is 0.4 x that mode)
 
 
 def _warm(baseline: Baseline, prep: Prepared) -> int:
@@ -43,7 +44,7 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
     """Band from a first fit on the preliminary band, then the baseline fitted again in the modes' band."""
     src = fit_data or m
     prep0 = prepare(src)
-    split0 = _split(prep0, None if fit_data else train, None if fit_data else test, 4.0 / prep0.band[0])
+    split0 = _split(prep0, None if fit_data else train, None if fit_data else test, BLOCK_PERIODS * 0.4 / prep0.band[0])
     rows0 = np.arange(prep0.edge, prep0.n - prep0.edge) if fit_data else split0.rows("train")
     first = ModalBaseline.fit(prep0, rows0)
     f = first.model.frequencies_hz
@@ -77,7 +78,7 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
         band, poles0 = _fit_modal(m, fit_data, train, test)
         prep = prepare(m, band)
     f_min = float(prep.band[0]) / 0.4
-    split = _split(prep, train, test, 4.0 / f_min)
+    split = _split(prep, train, test, BLOCK_PERIODS / f_min)
     if rig is None:
         if fit_data is not None:
             prep_fit = prepare(fit_data, band)
