@@ -8,6 +8,7 @@ files, as ``NAME.part`` renamed to ``NAME`` when the recording ends.
 from __future__ import annotations
 
 import argparse
+import collections
 import queue
 import signal
 import sys
@@ -19,7 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from ident.cli import DURATION, SEED, WINDOW, OneLineParser, number, run_guarded
-from ident.live.pipeline import Pipeline, PipelineConfig, rolling_config
+from ident.live.pipeline import Pipeline, PipelineConfig, model_records, parse_gaps, rolling_config, warm_up
+from ident.live.regimes import RegimeConfig
+from ident.simulate import kernels_cached
 
 from . import bench, calibrate
 from .config import Config, load_config
@@ -46,6 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--duration", type=DURATION, help="stop after this many seconds of samples")
     r.add_argument("--quiet", action="store_true", help="no live status line")
     r.add_argument("--force", action="store_true", help="replace existing output files")
+    r.add_argument("--accel-json", action="store_true",
+                   help="also one JSON message per sample on /rig/accel, plottable as is in Foxglove and "
+                        "PlotJuggler (about 44 bytes per sample more than the 21 of the compact recording; the serial "
+                        "bytes are kept either way; always so with --format lines)")
     add_link_options(r)
     add_live_options(r, "the recording")
     r.set_defaults(func=record)
@@ -93,6 +100,16 @@ def add_live_options(p, beside: str) -> None:
     p.add_argument("--no-identify", action="store_true", help="no rolling SINDy (filters and regimes only)")
     p.add_argument("--window", type=WINDOW, default=4.0, help="rolling SINDy window [s] (default 4)")
     p.add_argument("--hop", type=WINDOW, default=1.0, help="rolling SINDy hop [s] (default 1)")
+    p.add_argument("--gaps", metavar="G1,G2", type=_gaps, help="the tips' stopper gaps [m] for the regime monitor "
+                   "(default: learned from the data)")
+
+
+def _gaps(text: str) -> tuple[float, float]:
+    """argparse type of --gaps G1,G2."""
+    try:
+        return parse_gaps(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--gaps ")) from None
 
 
 def check_live(args) -> None:
@@ -150,12 +167,15 @@ def record(args) -> int:
     acq = Acquisition(port, cfg)
     live = None
     try:
+        # before the port opens, so that a device's bytes do not wait in the port's buffer meanwhile
+        compile_s = 0.0 if args.no_identify else compile_kernels()
         acq.open()  # a wrong port fails here, before any file exists
         if not args.no_identify or args.events:
             live = LiveProcessing(cfg.daq.rate_hz, mode, rrd, args.events, args.window, args.hop, args.bind,
-                                  force=args.force, inputs=inputs, identify=not args.no_identify)
+                                  force=args.force, inputs=inputs, identify=not args.no_identify, gaps=args.gaps,
+                                  compile_s=compile_s)
         try:
-            rec = McapRecorder(out, cfg, port=port, force=args.force, inputs=inputs)
+            rec = McapRecorder(out, cfg, port=port, force=args.force, inputs=inputs, accel_json=args.accel_json)
         except BaseException:
             if live is not None:
                 live.abort()
@@ -177,11 +197,7 @@ def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | No
         rec.write_block(b)
         if live is not None:
             live.submit(b)
-            events, models = live.drain()
-            for e in events:
-                rec.write_event(e)
-            for m in models:
-                rec.write_model(m)
+            live.write_to(rec)
         now = time.monotonic()
         if now - last_status[0] >= 1.0:
             last_status[0] = now
@@ -206,11 +222,7 @@ def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | No
     finally:
         if live is not None:
             live.close()
-            events, models = live.drain()
-            for e in events:
-                rec.write_event(e)
-            for m in models:
-                rec.write_model(m)
+            live.write_to(rec)
         rec.write_status(acq.status())
         rec.close()
     st = acq.status()
@@ -229,13 +241,6 @@ def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | No
     return 0
 
 
-def model_records(fit) -> list[dict]:
-    """One record per beam of a rolling-window fit: the model as a time series entry."""
-    return [{"t": fit.t_s, "beam": i + 1, "equations": b.model.equations(), "coefficients": b.model.as_dict(),
-             "active": list(b.active), "integration_nrmse": b.error, "natural_frequency_hz": b.natural_frequency_hz,
-             "stiffness_per_mass": b.stiffness_per_mass, "changed": b.changed} for i, b in enumerate(fit.beams)]
-
-
 class LiveProcessing:
     """The pipeline beside acquisition, in a worker thread, so a slow model fit never stalls the port.
 
@@ -246,9 +251,14 @@ class LiveProcessing:
 
     def __init__(self, fs_hz: float, viewer_mode: str, rrd_path: Path | None, events_path: Path | None,
                  window_s: float = 4.0, hop_s: float = 1.0, bind: str = DEFAULT_BIND, *, force: bool = False,
-                 inputs=(), identify: bool = True):
+                 inputs=(), identify: bool = True, gaps: tuple[float, float] | None = None,
+                 compile_s: float | None = None):
         self.identify = identify
-        self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, rolling=rolling_config(fs_hz, window_s, hop_s)))
+        self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, rolling=rolling_config(fs_hz, window_s, hop_s),
+                                            regime=RegimeConfig(fs_hz=fs_hz, gap_m=gaps)))
+        # the kernels compiled before the first sample (``compile_s``: the caller already did, so long)
+        self.compile_s = compile_s if compile_s is not None else (compile_kernels() if identify else 0.0)
+        self.fs_hz = fs_hz
         self.jsonl = JsonlEvents(events_path, force=force, inputs=inputs) if events_path else None
         try:
             self.viewer = RerunViewer(viewer_mode if identify else "none", rrd_path=rrd_path, fs_hz=fs_hz,
@@ -263,55 +273,89 @@ class LiveProcessing:
         self.regimes: list[str] = []
         self.busy_s = 0.0
         self.error: str | None = None
+        # timeline times of the samples submitted (the last ones, enough to reach back over a window):
+        # pipeline times count samples, the recording's log times follow the timeline
+        self._submitted = 0
+        self._timeline: collections.deque = collections.deque()
+        self._keep = int((window_s + 2 * hop_s + 5.0) * fs_hz)
         self.thread = threading.Thread(target=self._work, daemon=True)
         if identify:
             self.thread.start()
 
     def submit(self, block) -> None:
-        if self.identify:
-            self.inq.put((time.monotonic(), block.values))
+        if not self.identify:
+            return
+        self._timeline.append((self._submitted, np.asarray(block.t_s, float)))
+        self._submitted += len(block)
+        while self._timeline and self._timeline[0][0] + len(self._timeline[0][1]) < self._submitted - self._keep:
+            self._timeline.popleft()
+        self.inq.put((time.monotonic(), block.values))
+
+    def timeline_s(self, t_stream_s: float) -> float | None:
+        """The timeline time (``SampleBlock.t_s``, what the recording's log times follow) of the last sample
+        before pipeline time t (the pipeline counts samples from the start)."""
+        k = int(round(t_stream_s * self.fs_hz)) - 1
+        for start, t in reversed(self._timeline):
+            if start <= k < start + len(t):
+                return float(t[k - start])
+        return None
 
     def _work(self) -> None:
+        last_window = -1.0
         while True:
             item = self.inq.get()
             if item is None:
+                self._handle(self.pipe.finish())  # the last window's refined fit
                 return
             arrived, values = item
             t0 = time.monotonic()
-            try:
-                out = self.pipe.step(values)
-                self.viewer.log_step(out)
-            except Exception as exc:  # noqa: BLE001 - processing must never stop the recording
-                if self.error is None:
-                    self.error = f"{type(exc).__name__}: {exc}"
-                    self.outq.put(Event(0.0, "error", f"live processing stopped: {self.error}", "error"))
+            out = self._handle(self.pipe.step, values)
+            if out is None:
                 continue
             done = time.monotonic()
             self.busy_s += done - t0
-            if out.fits:
+            if out.fits and out.fits[-1].t_s > last_window:  # a window's first model update (refits follow)
+                last_window = out.fits[-1].t_s
                 self.latencies.append(done - arrived)
-            for f in out.fits:
-                self.outq.put(("model", model_records(f)))
-            for e in out.events:
-                if self.jsonl:
-                    self.jsonl.write(e)
-                if e["kind"] == "regime":
-                    self.regimes.append(e["regime"])
-                msg = (f"regime {e['regime']} (was {e['previous']})" if e["kind"] == "regime"
-                       else f"beam {e.get('beam')} model changed: " + "; ".join(e.get("equations", [])))
-                data = {k: v for k, v in e.items() if k not in ("t", "kind")}
-                self.outq.put(Event(e["t"], e["kind"], msg, "info", data))
 
-    def drain(self) -> tuple[list, list]:
-        """(events, per-window model records) produced since the last call."""
-        events, models = [], []
+    def _handle(self, step, *args):
+        """Run a pipeline step (or take its output), show it, queue its models and events for the recorder."""
+        try:
+            out = step(*args) if args else step
+            self.viewer.log_step(out)
+        except Exception as exc:  # noqa: BLE001 - processing must never stop the recording
+            if self.error is None:
+                self.error = f"{type(exc).__name__}: {exc}"
+                self.outq.put(Event(0.0, "error", f"live processing stopped: {self.error}", "error"))
+            return None
+        for f in out.fits:
+            self.outq.put(("model", f.t_s, model_records(f)))
+        for e in out.events:
+            if self.jsonl:
+                self.jsonl.write(e)
+            if e["kind"] == "regime":
+                self.regimes.append(e["regime"])
+            msg = (f"regime {e['regime']} (was {e['previous']})" if e["kind"] == "regime"
+                   else f"beam {e.get('beam')} model changed: " + "; ".join(e.get("equations", [])))
+            data = {k: v for k, v in e.items() if k not in ("t", "kind")}
+            self.outq.put(Event(e["t"], e["kind"], msg, "info", data))
+        return out
+
+    def write_to(self, rec) -> None:
+        """Write the events and per-window models produced since the last call to the recorder, stamped
+        with the data time they describe (log_time; publish_time is now)."""
         while not self.outq.empty():
             item = self.outq.get_nowait()
             if isinstance(item, tuple) and item[0] == "model":
-                models += item[1]
+                t = self.timeline_s(item[1])
+                log_ns = rec.log_time_ns(t) if t is not None else None
+                for m in item[2]:
+                    rec.write_model(m, log_ns=log_ns)
+            elif item.kind in ("regime", "model"):
+                t = self.timeline_s(item.t)
+                rec.write_event(item, log_ns=rec.log_time_ns(t) if t is not None else None)
             else:
-                events.append(item)
-        return events, models
+                rec.write_event(item)
 
     def log_event(self, e) -> None:
         if self.jsonl:
@@ -335,7 +379,25 @@ class LiveProcessing:
         p = (f"latency sample -> model update p50 {1e3 * np.percentile(lat, 50):.0f} ms, "
              f"p95 {1e3 * np.percentile(lat, 95):.0f} ms" if lat.size else "no model update")
         return (f"live: {len(self.latencies)} model updates, {len(self.regimes)} regime changes, {p}"
-                + (f"; ERROR {self.error}" if self.error else ""))
+                + (f"; kernels compiled in {self.compile_s:.1f} s before the first sample" if self.compile_s > 1.0
+                   else "") + (f"; ERROR {self.error}" if self.error else ""))
+
+
+def compile_kernels() -> float:
+    """Compile the identification's numba kernels before data flows, so that no window waits for the
+    compiler: from numba's disk cache this takes a moment; the first run after an install compiles for
+    some seconds and says so on a terminal while it does. Seconds taken."""
+    cold = kernels_cached() is False
+    tell = cold and sys.stderr.isatty()
+    if tell:
+        print("compiling the identification kernels before the first sample (first run after an install; "
+              "numba caches them, so later runs start at once)...", end="", file=sys.stderr, flush=True)
+    t0 = time.monotonic()
+    warm_up()
+    took = time.monotonic() - t0
+    if tell:
+        print(f" compiled in {took:.1f} s", file=sys.stderr, flush=True)
+    return took
 
 
 def main(argv: list[str] | None = None) -> int:

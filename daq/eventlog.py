@@ -15,8 +15,13 @@ from .safeio import PartFile
 
 
 def _clean(v):
+    """NaN and inf as null (JSON has neither), inside lists and dicts too."""
     if isinstance(v, float) and not math.isfinite(v):
         return None
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_clean(x) for x in v]
     return v
 
 

@@ -184,6 +184,9 @@ class Frames:
     gaps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # frames lost before each
     restart: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # a device restart before each
     status: tuple[Status, ...] = ()
+    # where each frame ends in the stream fed (bytes from the first byte fed), so a reader can tell which
+    # read delivered it; empty where the decoder does not know (text lines)
+    end: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     def __len__(self) -> int:
         return len(self.seq)
@@ -191,7 +194,7 @@ class Frames:
     def take(self, k: int) -> "Frames":
         """The first ``k`` data frames (and the status frames before them)."""
         return Frames(self.seq[:k], self.t_us[:k], self.counts[:k], self.flags[:k], self.gaps[:k], self.restart[:k],
-                      tuple(s for s in self.status if s.index <= k))
+                      tuple(s for s in self.status if s.index <= k), self.end[:k])
 
 
 def _empty(status: tuple[Status, ...] = ()) -> Frames:
@@ -227,6 +230,7 @@ class Decoder:
     def _scan(self, final: bool) -> Frames:
         buf = self._buf
         n = len(buf)
+        base = self.counters.bytes_in - n  # the stream offset of buf[0]
         if n < FRAME_LEN and not final:
             return EMPTY
         arr = np.frombuffer(buf, dtype=np.uint8)
@@ -292,7 +296,7 @@ class Decoder:
         if not keep.any():
             return _empty(status)
         return Frames(fr["seq"][keep].copy(), fr["t_us"][keep].copy(), fr["ch"][keep].copy(), fr["flags"][keep].copy(),
-                      gaps[keep], restart[keep], status)
+                      gaps[keep], restart[keep], status, (base + FRAME_LEN + data_starts[keep]).astype(np.int64))
 
     def _sequence(self, seq: np.ndarray, t_us: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(delivered mask, frames lost before each, restart before each) for decoded data frames in order."""

@@ -1,20 +1,35 @@
-"""MCAP recorder sink: every sample, the raw bytes, events and status, crash-safe.
+"""MCAP recorder sink: every sample (as the raw bytes), events, status and models, crash-safe.
 
 Channels (JSON schema encoding, readable by Foxglove and PlotJuggler):
 
-- ``/rig/accel`` (``rig.Accel``): one message per frame with scalar fields
-  ``seq``, ``t_device`` [s], ``base``, ``tip1``, ``tip2`` [m/s^2], ``clipped``:
-  every sample, plottable as is. ``log_time`` is the sample's time on the
-  device clock, anchored to the host clock at the first frame;
-  ``publish_time`` is when the host read the bytes that carried it.
 - ``/rig/raw`` (no schema, ``application/octet-stream``): the serial bytes
-  exactly as read, so a recording can be decoded again later; log_time =
-  publish_time = host read time.
+  exactly as read: for a binary-frame device the record of the samples (about
+  16 bytes per sample with zstd), decoded again by every reader
+  (replay.formats.mcap) with the ``calibration`` metadata and the ``samples``
+  metadata (first_seq, last_seq, count, anchor_ns); log_time = publish_time =
+  host read time.
+- ``/rig/accel`` (``rig.Accel``): one message per frame with scalar fields
+  ``seq``, ``t_device`` [s], ``base``, ``tip1``, ``tip2`` [m/s^2], ``clipped``,
+  plottable as is in Foxglove and PlotJuggler (about 44 more bytes per sample).
+  Written only with ``accel_json=True`` (``daq record --accel-json``), for
+  imports (no serial bytes) and for text-line devices (``daq.format: lines``:
+  a line has no checksum, so the decoded values are the record; the lines
+  stay in ``/rig/raw`` beside them). ``log_time`` is the sample's place on the
+  timeline (device time, re-anchored at a device restart), anchored to the
+  host clock at the first read: the last frame it delivered arrived then, so
+  a first read that drained a full port buffer does not push every time
+  into the future (the anchor is also in the ``samples``
+  metadata, so readers give raw-decoded samples the same times);
+  ``publish_time`` is when the host read the bytes that carried it.
 - ``/rig/events`` (``foxglove.Log``): drops, CRC failures, disconnects,
   reconnects, regime changes; with our fields ``t`` and ``kind`` added.
 - ``/rig/status`` (``rig.Status``): counters and clock estimates once a second.
 - ``/rig/model`` (``rig.Model``): every rolling window's model per beam: equations,
-  coefficients, active set, integration NRMSE, identified natural frequency.
+  coefficients with their ensemble spread and inclusion probability, active set, integration
+  NRMSE, natural frequency (and spread) and displacement amplitude (the backbone). ``log_time``
+  is the data time of the window's last sample (on the timeline, anchored as the samples), so
+  models line up with the data they fit; ``publish_time`` is when the model was computed.
+  Regime and model-change events on ``/rig/events`` are stamped the same way.
 - ``/rig/device`` (``rig.Device``): every status frame of the device (device id, session id,
   firmware, protocol, rate, counter, device time): who was recorded, and each boot.
 
@@ -101,6 +116,11 @@ MODEL_SCHEMA = {
         "natural_frequency_hz": {"type": "number"},
         "stiffness_per_mass": {"type": "number", "description": "1/s^2"},
         "changed": {"type": "boolean", "description": "active set differs from the previous window's"},
+        "coefficient_std": {"type": "object", "description": "per equation and term: spread over the ensemble"},
+        "inclusion_probability": {"type": "object", "description": "per equation and term: share of the "
+                                  "ensemble's models holding the term"},
+        "natural_frequency_std_hz": {"type": "number"},
+        "amplitude_m": {"type": "number", "description": "sqrt(2) RMS relative displacement over the window"},
     },
 }
 LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
@@ -114,11 +134,13 @@ class McapRecorder:
     """The live MCAP sink. ``path`` is the final name; until :meth:`close` the data is in ``path.part``.
 
     ``inputs`` and ``force`` are checked as daq.safeio.check_outputs does (the command checks them
-    first; this repeats the check at the rename).
+    first; this repeats the check at the rename). ``accel_json``: also the samples as JSON on
+    ``/rig/accel`` (always so for a text-line device, whose raw lines are no checksummed record).
     """
 
     def __init__(self, path: str | Path, config: Config, *, port: str = "", flush_s: float | None = None,
-                 force: bool = False, inputs: Iterable[str | Path | None] = ()):
+                 force: bool = False, inputs: Iterable[str | Path | None] = (), accel_json: bool = False):
+        self.accel_json = accel_json or config.daq.format != "frames"
         self.path = Path(path)
         self._out = PartFile(self.path, inputs=inputs, force=force, label="-o")
         self._fh = self._out.file
@@ -128,6 +150,8 @@ class McapRecorder:
         self._records: list = []  # schema and channel records, repeated after every chunk
         for key, schema in (("accel", ACCEL_SCHEMA), ("events", LOG_SCHEMA), ("status", STATUS_SCHEMA),
                             ("model", MODEL_SCHEMA), ("device", DEVICE_SCHEMA)):
+            if key == "accel" and not self.accel_json:
+                continue  # the samples live in /rig/raw alone
             data = json.dumps(schema).encode()
             sid = self._w.register_schema(schema["title"], "jsonschema", data)
             ids[key] = self._w.register_channel(TOPICS[key], "json", sid)
@@ -151,7 +175,7 @@ class McapRecorder:
         self._flush_samples = max(1, int(self._flush_s * config.daq.rate_hz))
         self._since_flush = 0
         self._last_flush = time.monotonic()
-        self._anchor_ns: int | None = None  # host epoch ns at device time 0
+        self._anchor_ns: int | None = None  # host epoch ns at timeline 0 (the log time of the first sample)
         self._seq = {k: 0 for k in ids}
         self.samples = 0
         self._first_seq: int | None = None
@@ -172,13 +196,15 @@ class McapRecorder:
         if not len(b):
             return
         if self._anchor_ns is None:
-            self._anchor_ns = b.host_ns - int(round(float(b.t_s[0]) * 1e9))
-        log_ns = self._anchor_ns + np.rint(np.asarray(b.t_s) * 1e9).astype(np.int64)
-        v = b.values
-        for i in range(len(b)):
-            msg = (f'{{"seq":{int(b.seq[i])},"t_device":{b.t_device_s[i]:.6f},"base":{v[i, 0]:.6g},'
-                   f'"tip1":{v[i, 1]:.6g},"tip2":{v[i, 2]:.6g},"clipped":{"true" if b.clipped[i] else "false"}}}')
-            self._add("accel", int(log_ns[i]), b.host_ns, msg.encode())
+            # the read that delivered the first block arrived with its last frame: that frame is "now"
+            self._anchor_ns = b.host_ns - int(round(float(b.t_s[-1]) * 1e9))
+        if self.accel_json:
+            log_ns = self._anchor_ns + np.rint(np.asarray(b.t_s) * 1e9).astype(np.int64)
+            v = b.values
+            for i in range(len(b)):
+                msg = (f'{{"seq":{int(b.seq[i])},"t_device":{b.t_device_s[i]:.6f},"base":{v[i, 0]:.6g},'
+                       f'"tip1":{v[i, 1]:.6g},"tip2":{v[i, 2]:.6g},"clipped":{"true" if b.clipped[i] else "false"}}}')
+                self._add("accel", int(log_ns[i]), b.host_ns, msg.encode())
         if self._first_seq is None:
             self._first_seq = int(b.seq[0])
         self._last_seq = int(b.seq[-1])
@@ -190,17 +216,24 @@ class McapRecorder:
         """One status frame of the device."""
         self._add("device", host_ns, host_ns, json.dumps(status.as_dict()).encode())
 
-    def write_event(self, e: Event, host_ns: int | None = None) -> None:
+    def write_event(self, e: Event, host_ns: int | None = None, log_ns: int | None = None) -> None:
         ns = time.time_ns() if host_ns is None else host_ns
-        msg = {"timestamp": {"sec": ns // 10**9, "nsec": ns % 10**9}, "level": LEVELS.get(e.level, 2),
+        log = ns if log_ns is None else log_ns  # the data time an event describes, where it has one
+        msg = {"timestamp": {"sec": log // 10**9, "nsec": log % 10**9}, "level": LEVELS.get(e.level, 2),
                "message": e.message, "name": "daq", "file": "", "line": 0, "t": e.t, "kind": e.kind, **e.data}
-        self._add("events", ns, ns, json.dumps(msg).encode())
+        self._add("events", log, ns, json.dumps(msg).encode())
 
-    def write_model(self, record: dict) -> None:
-        """One rolling-window model of one beam (the identification's time series)."""
+    def log_time_ns(self, t_s: float) -> int | None:
+        """The log time of a sample at this place on the timeline (``SampleBlock.t_s``; None before the first
+        sample)."""
+        return None if self._anchor_ns is None else self._anchor_ns + int(round(t_s * 1e9))
+
+    def write_model(self, record: dict, log_ns: int | None = None) -> None:
+        """One rolling-window model of one beam (the identification's time series), logged at the data
+        time of the window (log_ns) and published now."""
         ns = time.time_ns()
-        clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in record.items()}
-        self._add("model", ns, ns, json.dumps(clean).encode())
+        clean = json.loads(json.dumps(record), parse_constant=lambda c: None)  # NaN and inf as null
+        self._add("model", ns if log_ns is None else log_ns, ns, json.dumps(clean).encode())
 
     def write_status(self, status: dict) -> None:
         ns = time.time_ns()
@@ -233,8 +266,9 @@ class McapRecorder:
             return self.path
         self.closed = True
         if self._first_seq is not None:
-            # the recorded frames are the first ``count`` data frames that decoding /rig/raw gives
+            # the recorded frames are the first ``count`` data frames that decoding /rig/raw gives; anchor_ns
+            # is the log time of the first (readers stamp raw-decoded samples as /rig/accel would be)
             self._w.add_metadata("samples", {"first_seq": str(self._first_seq), "last_seq": str(self._last_seq),
-                                             "count": str(self.samples)})
+                                             "count": str(self.samples), "anchor_ns": str(self._anchor_ns)})
         self._w.finish()
         return self._out.commit()

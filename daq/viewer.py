@@ -12,6 +12,9 @@ Entities (all on the timeline ``time``, seconds since the start of the stream):
   displacement over the last window (the identified model's prediction);
 - ``model/beam{1,2}/natural_frequency_hz`` and ``.../integration_nrmse``: the
   identified stiffness as a frequency and each window's integration error, over time;
+- ``backbone/beam{1,2}``: each window's natural frequency [Hz] against its displacement
+  amplitude [mm] (the beam's backbone), with the ensemble's +-1 standard deviation as a bar
+  (``backbone/beam{1,2}/spread``); the frequency axis points up;
 - ``regime``: the regime as a state timeline (``rr.StateChange``);
 - ``events``: regime changes, model changes, drops, reconnects (``rr.TextLog``).
 
@@ -73,9 +76,12 @@ def blueprint():
                     rrb.BarChartView(origin="model/beam1/coefficients", name="beam 1 coefficients"),
                     rrb.BarChartView(origin="model/beam2/coefficients", name="beam 2 coefficients"),
                 ),
-                rrb.TimeSeriesView(origin="model", name="model prediction vs measurement",
-                                   contents=["model/beam1/z", "model/beam1/z_pred", "model/beam2/z",
-                                             "model/beam2/z_pred"]),
+                rrb.Horizontal(
+                    rrb.TimeSeriesView(origin="model", name="model prediction vs measurement",
+                                       contents=["model/beam1/z", "model/beam1/z_pred", "model/beam2/z",
+                                                 "model/beam2/z_pred"]),
+                    rrb.Spatial2DView(origin="backbone", name="backbone: natural frequency [Hz] vs amplitude [mm]"),
+                ),
                 rrb.TextLogView(origin="events", name="events"),
             ),
         ),
@@ -87,7 +93,10 @@ ENTITIES = ("accel/raw/base", "accel/raw/tip1", "accel/raw/tip2", "accel/filtere
             "accel/filtered/tip2", "phase/tip1", "model/beam1/coefficients", "model/beam2/coefficients",
             "model/beam1/z", "model/beam1/z_pred", "model/beam2/z", "model/beam2/z_pred",
             "model/beam1/natural_frequency_hz", "model/beam2/natural_frequency_hz", "model/beam1/integration_nrmse",
-            "model/beam2/integration_nrmse", "regime", "events")
+            "model/beam2/integration_nrmse", "backbone/beam1", "backbone/beam2", "backbone/beam1/spread",
+            "backbone/beam2/spread", "regime", "events")
+BACKBONE_POINTS = 600  # the last windows shown on the backbone (10 minutes at a 1 s hop)
+BEAM_COLORS = ((230, 120, 30), (40, 140, 230))
 
 
 def _has_display() -> bool:
@@ -175,6 +184,7 @@ class RerunViewer:
         self._delay: int | None = None
         self._phase_t = -np.inf
         self._regime_started = False
+        self._backbone: tuple[list, list] = ([], [])  # per beam: (amplitude mm, frequency Hz, spread Hz)
         if mode == "none":
             self.rec = None
             return
@@ -213,6 +223,8 @@ class RerunViewer:
             self._rrd = PartFile(self.rrd_path, inputs=inputs, force=force, label="--viewer save")
             self._rrd.file.close()  # rerun writes the file itself
             self.rec.save(str(self._rrd.part), default_blueprint=bp)
+        # 2-D views draw y downwards: flip it so that frequency grows upwards on the backbone
+        self.rec.log("backbone", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
 
     def _time(self, t: np.ndarray):
         return [self.rr.TimeColumn("time", duration=np.asarray(t, float))]
@@ -246,8 +258,24 @@ class RerunViewer:
                 self.rec.log(f"{pre}/integration_nrmse", rr.Scalars(b.error))
                 self._scalars(f"{pre}/z", f.t, f.measured[:, i, 0])
                 self._scalars(f"{pre}/z_pred", f.t, f.predicted[:, i, 0])
+                self._backbone_point(i, b)
         for e in out.events:
             self.log_event(e)
+
+    def _backbone_point(self, i: int, b) -> None:
+        """Add a window's (amplitude, natural frequency) to beam i's backbone and show the last ones."""
+        if not np.isfinite(b.natural_frequency_hz):
+            return
+        pts = self._backbone[i]
+        pts.append((1e3 * b.amplitude_m, b.natural_frequency_hz, b.natural_frequency_std_hz))
+        del pts[:-BACKBONE_POINTS]
+        a = np.array(pts)
+        self.rec.log(f"backbone/beam{i + 1}",
+                     self.rr.Points2D(a[:, :2], colors=BEAM_COLORS[i], radii=self.rr.Radius.ui_points(3.0)))
+        ok = np.isfinite(a[:, 2])
+        bars = [[(x, f - s), (x, f + s)] for x, f, s in a[ok]]
+        if bars:
+            self.rec.log(f"backbone/beam{i + 1}/spread", self.rr.LineStrips2D(bars, colors=BEAM_COLORS[i]))
 
     def log_event(self, e: dict) -> None:
         if self.rec is None:

@@ -59,10 +59,12 @@ class PolynomialForcingLibrary:
 
     @property
     def names(self) -> list[str]:
-        out = [_term_name(tuple(p), list(self.state_names)) for p in self.powers]
-        if self.forcing:
-            out.append("F")
-        return out
+        cached = self.__dict__.get("_names")
+        if cached is None:  # frozen: store past __setattr__, once
+            cached = tuple(_term_name(tuple(p), list(self.state_names)) for p in self.powers)
+            cached += ("F",) if self.forcing else ()
+            object.__setattr__(self, "_names", cached)
+        return list(cached)
 
     def transform(self, x: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
         """Evaluate the library: ``x`` (..., n_states), ``f`` (...) -> (..., n_terms).

@@ -15,9 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
-from scipy.signal import sosfiltfilt
-
-from .filters import design_highpass
+from .filters import design_highpass, zero_phase
 
 
 def edge_samples(fs_hz: float, f_lo_hz: float) -> int:
@@ -39,7 +37,7 @@ def integrate_band(a: np.ndarray, fs_hz: float, f_lo_hz: float = 2.0) -> tuple[n
 
     def integ(x):
         y = cumulative_trapezoid(x - x.mean(axis=0), dx=dt, axis=0, initial=0.0)
-        y = sosfiltfilt(sos, y, axis=0)
+        y = zero_phase(sos, y)
         return y - y.mean(axis=0)
 
     v = integ(a)

@@ -123,6 +123,17 @@ def _rk4_parallel(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound
     return out, diverged
 
 
+def kernels_cached() -> bool | None:
+    """Whether numba's disk cache holds the integration kernels (so they load in milliseconds instead of
+    compiling for seconds); None where this numba keeps its cache elsewhere."""
+    import os
+
+    try:
+        return all(os.path.exists(k._cache._cache_file._index_path) for k in (_rk4_serial, _rk4_parallel))
+    except AttributeError:
+        return None
+
+
 # Below this many model-steps a batch runs on one thread: the pool's overhead would dominate.
 PARALLEL_MIN_WORK = 200_000
 

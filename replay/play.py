@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ident.live.pipeline import Pipeline, PipelineConfig, StepOutput, rolling_config
+from ident.live.regimes import RegimeConfig
 
 from .formats.base import Samples
 
@@ -30,11 +31,12 @@ class PlayReport:
 def play(samples: Samples, *, rate: float | None = 1.0, start_s: float = 0.0, duration_s: float | None = None,
          loop: bool = False, identify: bool = True, on_step: Callable[[StepOutput], None] | None = None,
          stop: Callable[[], bool] | None = None, max_loops: int | None = None, window_s: float = 4.0,
-         hop_s: float = 1.0) -> PlayReport:
+         hop_s: float = 1.0, gaps: tuple[float, float] | None = None) -> PlayReport:
     if rate is not None and not 0 < rate <= 1e6:
         raise ValueError(f"--rate must be a positive, finite speed, got {rate}")
     pipe = Pipeline(PipelineConfig(fs_hz=samples.fs_hz, identify=identify,
-                                   rolling=rolling_config(samples.fs_hz, window_s, hop_s)))
+                                   rolling=rolling_config(samples.fs_hz, window_s, hop_s),
+                                   regime=RegimeConfig(fs_hz=samples.fs_hz, gap_m=gaps)))
     rep = PlayReport()
     wall0 = time.monotonic()
     offset = 0.0  # stream time already played in earlier loops
@@ -65,5 +67,8 @@ def play(samples: Samples, *, rate: float | None = 1.0, start_s: float = 0.0, du
         offset = rep.stream_s
         if not loop or (max_loops is not None and rep.loops >= max_loops):
             break
+    out = pipe.finish()  # the last window's refined fit
+    if on_step is not None:
+        on_step(out)
     rep.wall_s = time.monotonic() - wall0
     return rep

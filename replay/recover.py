@@ -9,9 +9,10 @@ a damaged header costs nothing. The output is written beside its target and rena
 (daq.safeio), never over the input (compared by device and inode) and never over an existing file
 without ``force``.
 
-The output says what was lost: metadata ``recovery`` lists the damaged byte ranges of the input and,
-for ``/rig/accel``, the sequence numbers lost with them (``lost_seq``: ``a-b`` ranges), so ``replay
-info`` tells frames lost to file damage from frames the device dropped.
+The output says what was lost: metadata ``recovery`` lists the damaged byte ranges of the input and
+the sequence numbers lost with them (``lost_seq``: ``a-b`` ranges; from ``/rig/accel`` where the
+recording has it, else from the binary frames of ``/rig/raw``, decoded as they are copied), so
+``replay info`` tells frames lost to file damage from frames the device dropped.
 """
 
 from __future__ import annotations
@@ -22,10 +23,11 @@ from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
+from daq.protocol import Decoder
 from daq.recorder import TOPICS
 from daq.safeio import Output, check_outputs, safe_output
 
-from .formats.mcap import Damage, scan
+from .formats.mcap import Damage, raw_is_frames, scan
 
 
 @dataclass
@@ -34,7 +36,7 @@ class RecoverReport:
     chunks: int = 0  # intact chunks kept
     complete: bool = False  # the input had its footer and no damage: nothing was missing
     damage: list[Damage] = field(default_factory=list)
-    lost_seq: list[tuple[int, int]] = field(default_factory=list)  # /rig/accel sequence ranges lost to damage
+    lost_seq: list[tuple[int, int]] = field(default_factory=list)  # sequence ranges lost to damage
     dropped_messages: int = 0  # messages on channels that no intact record names
 
     @property
@@ -61,6 +63,10 @@ def recover(src: str | Path, dst: str | Path, force: bool = False) -> RecoverRep
     if not s.channels or not (s.chunks or s.loose):
         raise ValueError(f"{src}: no intact chunk with messages and channels found; nothing to recover")
     accel_ids = s.topic_ids(TOPICS["accel"])
+    # a compact recording's samples are the frames of /rig/raw: decode them as they go by to see what was lost
+    raw_ids = s.topic_ids(TOPICS["raw"]) if not accel_ids and raw_is_frames(s) else set()
+    decoder = Decoder()
+    last_raw, raw_off, crossed = None, -1, False  # the last frame's sequence, its chunk, damage since
     damage_starts = sorted(d.offset for d in s.damage)
     with safe_output(dst, inputs=[src], force=force, label="-o") as tmp, open(tmp, "wb") as fout:
         w = Writer(fout, compression=CompressionType.ZSTD)
@@ -84,6 +90,17 @@ def recover(src: str | Path, dst: str | Path, force: bool = False) -> RecoverRep
                     if a is not None and b is not None and b > a + 1:
                         report.lost_seq.append((a + 1, b - 1))
                 last, last_off = data, off
+            elif cid in raw_ids:
+                if last_raw is not None and off != raw_off and any(raw_off < d < off for d in damage_starts):
+                    crossed = True
+                fr = decoder.feed(data)
+                if len(fr):
+                    first = int(fr.seq[0])
+                    if crossed and last_raw is not None and first > last_raw + 1:
+                        report.lost_seq.append((last_raw + 1, first - 1))
+                    crossed = False
+                    last_raw = int(fr.seq[-1])
+                raw_off = off
             w.add_message(chan_map[cid], log, data, pub, seq)
             topic = s.channels[cid].topic
             report.messages[topic] = report.messages.get(topic, 0) + 1

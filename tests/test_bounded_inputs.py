@@ -84,6 +84,12 @@ def test_a_config_over_a_mebibyte_is_refused_before_it_is_read(tmp_path):
     (daq_main, ["record", "--sim", "--window", "2", "--hop", "3"]),
     (daq_main, ["sim", "--duration", "1e400"]),
     (daq_main, ["sim", "--seed", "-4"]),
+    (daq_main, ["record", "--sim", "--gaps", "0.003"]),  # two gaps, tip 1 and tip 2
+    (daq_main, ["record", "--sim", "--gaps", "0.003,nan"]),
+    (daq_main, ["record", "--sim", "--gaps", "0.003,-1"]),
+    (daq_main, ["bench", "--regimes", "--cases", "0"]),
+    (daq_main, ["bench", "--regimes", "--minutes", "inf"]),
+    (replay_main, ["{rec}", "--gaps", "a,b"]),
     (replay_main, ["{rec}", "--rate", "1e-300"]),  # was a traceback
     (replay_main, ["{rec}", "--rate", "inf"]),
     (replay_main, ["{rec}", "--start", "nan"]),
@@ -187,7 +193,7 @@ NUMERIC_OPTIONS = [
     (daq_parser, ["record", "--sim"], ["--duration", "--window", "--hop", "--baud"]),
     (daq_parser, ["calibrate", "--channel", "tip1"], ["--duration", "--reference-rms", "--reference-hz", "--baud"]),
     (daq_parser, ["sim"], ["--duration", "--seed", "--device-id"]),
-    (daq_parser, ["bench"], ["--seconds"]),
+    (daq_parser, ["bench"], ["--seconds", "--cases", "--seed", "--minutes"]),
     (replay_parser, ["play", "x.mcap"], ["--rate", "--start", "--duration", "--window", "--hop", "--fs"]),
     (replay_parser, ["import", "x.csv", "-o", "y.mcap"], ["--fs"]),
     (ident_parser, ["fit", "x.mcap"], ["--start", "--duration", "--degree", "--dimension", "--delay", "--fs"]),

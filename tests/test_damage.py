@@ -1,17 +1,17 @@
 """Damaged recordings: a generated corpus through every reading command, and what ``replay recover`` keeps.
 
-The corpus is one real 12 s recording of the simulated rig (one chunk per second) cut, bit-flipped
-and zeroed at chosen places: the magic, the header, the first chunk (its opcode, length, data),
+The corpus is one real 12 s recording of the simulated rig (one chunk per second; compact: the samples
+are the serial bytes of ``/rig/raw``) cut, bit-flipped and zeroed at chosen places: the magic, the header, the first chunk (its opcode, length, data),
 chunks in the middle, a chunk's CRC field, the summary, the footer, 4 KiB blocks at the start, in
 the middle and at the end, truncations inside and between chunks. Every reading command must end
 with exit 0, or exit 2 and one line (never a traceback); a file with damage must be called damaged
 and sent to ``replay recover``. What counts as intact comes from an independent reader: the
 ``mcap`` package's non-seeking ``StreamReader`` on the undamaged original gives every chunk's byte
-range and its messages; a chunk none of whose bytes were touched is intact, and every one of its
-samples must come back from recover, read again by the ``mcap`` package's own reader.
+range and its raw messages; a chunk none of whose bytes were touched is intact, and every sample whose
+frame lies wholly in its raw bytes must come back from recover, read again by the ``mcap`` package's
+own reader (the frames decoded by daq.protocol, itself checked against a byte-by-byte scanner).
 """
 
-import json
 import subprocess
 import sys
 from pathlib import Path
@@ -23,6 +23,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from clitools import run_main
 from ident.cli.main import main as ident_main
+from daq.protocol import FRAME_LEN, Decoder
 from replay.cli import main as replay_main
 from replay.formats import read_columns
 from replay.formats.mcap import scan
@@ -31,31 +32,38 @@ SUMMARY = {}  # figures for the report, printed at the end of the module
 
 
 def independent_chunks(path: Path) -> list[tuple[int, int, list[int]]]:
-    """(start, end, /rig/accel sequence numbers) of every chunk, from the mcap package's stream reader."""
-    out, topics = [], {}
+    """(start, end, sequence numbers of the frames wholly inside its /rig/raw bytes) of every chunk, from the
+    mcap package's stream reader."""
+    spans, raw, topics = [], [], {}
     with open(path, "rb") as f:
         reader = StreamReader(f, emit_chunks=True, skip_magic=False)
         start = f.tell()
         for rec in reader.records:
             end = f.tell()
             if isinstance(rec, Chunk):
-                seqs = []
+                lo = sum(len(b) for b in raw)
                 for r in breakup_chunk(rec):
                     if isinstance(r, Channel):
                         topics[r.id] = r.topic
-                    elif isinstance(r, Message) and topics.get(r.channel_id) == "/rig/accel":
-                        seqs.append(json.loads(r.data)["seq"])
-                out.append((start, end, seqs))
+                    elif isinstance(r, Message) and topics.get(r.channel_id) == "/rig/raw":
+                        raw.append(r.data)
+                spans.append((start, end, lo, sum(len(b) for b in raw)))
             start = end
-    return out
+    dec = Decoder()
+    fr = [dec.feed(b"".join(raw)), dec.flush()]
+    seq = [int(s) for p in fr for s in p.seq]
+    ends = [int(e) for p in fr for e in p.end]
+    return [(a, b, [s for s, e in zip(seq, ends) if lo <= e - FRAME_LEN and e <= hi]) for a, b, lo, hi in spans]
 
 
-def independent_accel(path: Path) -> dict[int, tuple]:
-    """seq -> (base, tip1, tip2) of every /rig/accel message, read by the mcap package's reader."""
+def independent_samples(path: Path) -> dict[int, tuple]:
+    """seq -> (base, tip1, tip2) ADC counts of every frame in the /rig/raw messages (read by the mcap package's
+    reader, in file order, decoded by daq.protocol)."""
     with open(path, "rb") as f:
-        return {d["seq"]: (d["base"], d["tip1"], d["tip2"])
-                for _, ch, m in make_reader(f).iter_messages(topics=["/rig/accel"], log_time_order=False)
-                for d in [json.loads(m.data)]}
+        data = b"".join(m.data for _, _, m in make_reader(f).iter_messages(topics=["/rig/raw"], log_time_order=False))
+    dec = Decoder()
+    return {int(s): tuple(int(c) for c in counts) for p in (dec.feed(data), dec.flush())
+            for s, counts in zip(p.seq, p.counts)}
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +74,9 @@ def original(tmp_path_factory):
                         str(path), "--quiet", "--no-identify"], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     chunks = independent_chunks(path)
-    assert len(chunks) >= 11 and sum(len(c[2]) for c in chunks) == 24000
+    assert not any(c.topic == "/rig/accel" for c in scan(path).channels.values())  # the compact layout
+    # every frame is in one chunk but those cut by a chunk's end (the frames past --duration are read too)
+    assert len(chunks) >= 11 and 24000 - len(chunks) <= sum(len(c[2]) for c in chunks) <= 24100
     return folder, path, chunks
 
 
@@ -112,7 +122,7 @@ def intact_seqs(chunks, damaged: list[tuple[int, int]]) -> set[int]:
 def test_every_reading_command_on_the_damaged_corpus(original):
     folder, path, chunks = original
     data = path.read_bytes()
-    truth = independent_accel(path)
+    truth = independent_samples(path)
     tracebacks, runs, expected_total, recovered_total = [], 0, 0, 0
     for name, (bad, damaged) in corpus(data, chunks).items():
         f = folder / f"{name}.mcap"
@@ -154,7 +164,7 @@ def test_every_reading_command_on_the_damaged_corpus(original):
             assert expect == set() and len(err.strip().splitlines()) == 1, (name, err)
             continue
         assert code == 0, (name, err)
-        got = independent_accel(fixed)
+        got = independent_samples(fixed)
         assert set(got) >= expect, (name, len(expect - set(got)))
         assert all(got[s] == truth[s] for s in got), name  # every recovered sample is the recorded one
         expected_total += len(expect)

@@ -2,7 +2,9 @@
 
 The simulated device (daq.sim) is served by ``PtyServer`` on a real pty, exactly as ``daq sim`` serves it;
 the recorder is ``daq record`` (run in this process, so the servers can be driven from threads), and
-the recordings are read back by the ``mcap`` package's own reader.
+the recordings are read back by the ``mcap`` package's own reader. The restart recording also keeps the
+JSON samples (``--accel-json``), against which the project's reader decodes the serial bytes; the others
+are compact (the samples only in ``/rig/raw``) and are read through it.
 """
 
 import json
@@ -23,6 +25,7 @@ from daq.driver import Acquisition, stable_port
 from daq.transport import PtyServer
 from replay.cli import main as replay_main
 from replay.formats import read_samples
+from replay.formats.mcap import decode_raw, read_recording, scan
 
 
 def messages(path: Path, topic: str) -> list[tuple[int, dict]]:
@@ -36,7 +39,7 @@ def test_device_restarts_keep_the_timeline_monotonic(tmp_path):
     cfg.write_text("daq:\n  faults:\n    restart_at_s: [2.0, 4.0]\n    restart_for_s: 0.3\n")
     out = tmp_path / "restart.mcap"
     code, stdout, err, tb = run_main(daq_main, ["record", "--sim", "--config", cfg, "--duration", "6", "-o", out,
-                                                "--quiet", "--no-identify"])
+                                                "--quiet", "--no-identify", "--accel-json"])
     assert code == 0 and tb is None, err
     accel = messages(out, "/rig/accel")
     log = np.array([t for t, _ in accel])
@@ -58,6 +61,15 @@ def test_device_restarts_keep_the_timeline_monotonic(tmp_path):
     assert code == 0 and "restarts   2 device restart(s)" in info and "drops      0 frame(s)" in info
     s = read_samples(out)  # replay places each session where the timeline has it
     assert abs(len(s.t) - 12000) <= 2 and np.count_nonzero(s.filled) == 12000 - len(seq)
+    # the serial bytes decoded (all a compact recording keeps) give the same samples at the same log times,
+    # both sessions placed where the device_restart events put them
+    with open(out, "rb") as f:
+        msgs = list(make_reader(f).iter_messages(topics=["/rig/raw", "/rig/accel"], log_time_order=False))
+    raws = [(m.data, m.publish_time) for _, ch, m in msgs if ch.topic == "/rig/raw"]
+    pub = np.array([m.publish_time for _, ch, m in msgs if ch.topic == "/rig/accel"])
+    d = decode_raw(scan(out), raws, events)
+    assert np.array_equal(d.seq, seq) and np.array_equal(d.log_time_ns, log) and np.array_equal(d.publish_time_ns, pub)
+    np.testing.assert_allclose(d.values, [[a["base"], a["tip1"], a["tip2"]] for _, a in accel], rtol=1e-5, atol=1e-5)
 
 
 def test_duplicate_frames_are_counted_and_stored_once(tmp_path):
@@ -67,7 +79,7 @@ def test_duplicate_frames_are_counted_and_stored_once(tmp_path):
     code, stdout, err, tb = run_main(daq_main, ["record", "--sim", "--config", cfg, "--duration", "3", "-o", out,
                                                 "--quiet", "--no-identify"])
     assert code == 0 and tb is None, err
-    seq = np.array([d["seq"] for _, d in messages(out, "/rig/accel")])
+    seq = read_recording(out, raw=False).seq  # decoded from the serial bytes: duplicates dropped there too
     assert np.all(np.diff(seq) == 1) and len(seq) == 6000  # each sample once, nothing counted as lost
     status = [d for _, d in messages(out, "/rig/status")][-1]
     assert 30 < status["duplicates"] < 100 and status["dropped_frames"] == 0  # 1 % of 6,000
@@ -119,7 +131,7 @@ def test_another_device_behind_the_same_path_is_never_merged(tmp_path, via):
     assert out.exists()  # what A gave is kept, and finished properly
     devices = {d["device_id"] for _, d in messages(out, "/rig/device")}
     assert devices == {"0000000a"}
-    seq = np.array([d["seq"] for _, d in messages(out, "/rig/accel")])
+    seq = read_recording(out, raw=False).seq  # the serial bytes recorded hold none of B's
     assert 3900 <= len(seq) <= 4100 and np.all(np.diff(seq) == 1)  # about 2 s of A, none of B
     events = [d for _, d in messages(out, "/rig/events")]
     foreign = [e for e in events if e["kind"] == "foreign_device"]

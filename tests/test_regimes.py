@@ -1,4 +1,5 @@
-"""Regime monitor on the simulated rig: a sequence through all four regimes, and 10 steady minutes."""
+"""Regime monitor: on the project's rig (features against the simulation's states) and on the independent
+generator's rigs (regimes against its per-sample truth); the streaming stage's block-split invariance."""
 
 from dataclasses import replace
 
@@ -6,9 +7,10 @@ import numpy as np
 import pytest
 
 from daq.sim.excitation import Kick, Step
-from ident.live.regimes import RegimeConfig, RegimeMonitor, label_of
 from daq.sim.rig import RigConfig, simulate_rig
 from daq.sim.sensors import to_counts
+from ident.live.regimes import LABELS, RegimeConfig, RegimeMonitor, label_of, regime_start, regime_step
+from ident.live.scoring import score_regimes, true_changes
 
 FS = 2000.0
 
@@ -22,11 +24,11 @@ def measured(cfg, seconds, seed=0):
     t, o = simulate_rig(cfg, seconds, FS)
     rng = np.random.default_rng(seed)
     sig = [to_counts(x, s, rng)[0] * s.lsb_m_per_s2 for x, s in zip((o.base, o.tip1, o.tip2), cfg.sensors)]
-    return t, np.column_stack(sig), o.contact != 0
+    return t, np.column_stack(sig), o
 
 
-def run_monitor(x, seed=1):
-    mon = RegimeMonitor(RegimeConfig(fs_hz=FS))
+def run_monitor(x, seed=1, cfg=RegimeConfig(fs_hz=FS)):
+    mon = RegimeMonitor(cfg)
     rng = np.random.default_rng(seed)
     windows, changes, pos = [], [], 0
     while pos < len(x):
@@ -38,6 +40,14 @@ def run_monitor(x, seed=1):
     return windows, changes
 
 
+def lock_in(y, fs, f):
+    """Complex amplitude of y at frequency f (Hann-weighted, as the monitor), per column."""
+    n = len(y)
+    w = np.hanning(n)
+    y = y - y.mean(axis=0)
+    return 2 * ((y * w[:, None]).T @ np.exp(-2j * np.pi * f * np.arange(n) / fs)) / w.sum()
+
+
 @pytest.fixture(scope="module")
 def sequence():
     kicks = (Kick(kick_time(20), 1, 0.3), Kick(kick_time(60), 2, 0.3), Kick(kick_time(100), 1, 0.3),
@@ -45,7 +55,8 @@ def sequence():
     steps = (Step(40, 0.6), Step(45, 1.93), Step(80, 0.6), Step(85, 1.93), Step(120, 0.6), Step(125, 1.93))
     cfg = RigConfig()
     cfg = replace(cfg, excitation=replace(cfg.excitation, kicks=kicks, steps=steps))
-    t, x, contact = measured(cfg, 140.0)
+    t, x, o = measured(cfg, 140.0)
+    contact = o.contact != 0
     # truth: a beam is hitting in a window if it touched its stopper within it
     windows, changes = run_monitor(x)
     truth = []
@@ -53,39 +64,53 @@ def sequence():
         i1 = int(round(w.t_s * FS))
         sl = slice(max(0, i1 - int(0.5 * FS)), i1)
         truth.append(label_of(contact[sl, 0].any(), contact[sl, 1].any()))
-    true_changes = [(windows[i].t_s, truth[i]) for i in range(1, len(truth)) if truth[i] != truth[i - 1]]
-    return windows, changes, truth, true_changes
+    true_ch = [(windows[i].t_s, truth[i]) for i in range(1, len(truth)) if truth[i] != truth[i - 1]]
+    return windows, changes, truth, true_ch, x, o
 
 
 def test_the_sequence_visits_all_four_regimes(sequence):
-    _, _, truth, true_changes = sequence
+    _, _, truth, true_ch, _, _ = sequence
     assert set(truth) == {"linear", "localized-1", "localized-2", "impacting-both"}
-    assert len(true_changes) == 6
+    assert len(true_ch) == 6
 
 
 def test_at_least_95_percent_of_windows_labelled_right(sequence):
-    windows, _, truth, _ = sequence
+    windows, _, truth, _, _, _ = sequence
     right = np.mean([w.label == tr for w, tr in zip(windows, truth)])
     assert right >= 0.95, right
 
 
 def test_every_change_reported_within_one_second_and_nothing_else(sequence):
-    _, changes, _, true_changes = sequence
-    assert len(changes) == len(true_changes)
-    for (t_true, regime), ch in zip(true_changes, changes):
+    _, changes, _, true_ch, _, _ = sequence
+    assert len(changes) == len(true_ch)
+    for (t_true, regime), ch in zip(true_ch, changes):
         assert ch.regime == regime
         assert 0 <= ch.t_s - t_true <= 1.0, (t_true, ch)
 
 
-def test_features_reported_with_every_window(sequence):
-    windows, _, truth, _ = sequence
+def test_features_against_the_simulated_states(sequence):
+    """Displacement amplitude and phase per window against the simulation's own relative displacement and
+    clean accelerations (the monitor sees only the noisy ADC counts); the impact band separates."""
+    windows, _, truth, _, _, o = sequence
+    n = int(0.5 * FS)
+    steady = [w for w, tr in zip(windows, truth) if tr == w.label and w.t_s > 25 and int(w.t_s * 4) % 8 == 0]
+    assert len(steady) > 30
+    for w in steady:
+        k = int(round(w.t_s * FS))
+        sl = slice(k - n, k)
+        z = lock_in(o.z[sl], FS, w.drive_frequency_hz)
+        clean = lock_in(np.column_stack([o.base[sl], o.tip1[sl], o.tip2[sl]]), FS, w.drive_frequency_hz)
+        for i, b in enumerate(w.beams):
+            assert b.displacement_m == pytest.approx(abs(z[i]), rel=0.03)
+            phase = np.degrees(np.angle(clean[1 + i] / clean[0]))
+            assert abs((b.phase_deg - phase + 180) % 360 - 180) < 3.0
+            assert b.sign == 1
+        assert w.amplitude_ratio == pytest.approx(abs(z[0] / z[1]), rel=0.05)
     lin = [w for w, tr in zip(windows, truth) if tr == "linear" and w.label == "linear"]
     loc = [w for w, tr in zip(windows, truth) if tr == "localized-1" and w.label == "localized-1"]
-    assert np.median([w.amplitude_ratio for w in lin]) == pytest.approx(1.0, abs=0.05)  # equal tips
-    assert np.median([w.amplitude_ratio for w in loc]) > 1.5  # beam 1 dominates (1.9 below 50 Hz)
     # tips lag the base by about 158 degrees in the linear regime (see ident.rig)
     assert abs(np.median([abs(w.phase_deg[0]) for w in lin]) - 158) < 10
-    assert max(w.impact_rms[0] for w in lin) < 0.3 < 1.0 < min(w.impact_rms[0] for w in loc)
+    assert max(w.impact_rms[0] for w in lin) < 0.3 < min(w.impact_rms[0] for w in loc)
 
 
 @pytest.mark.parametrize("kicks", [(), (Kick(kick_time(20), 1, 0.3),)], ids=["linear", "localized-1"])
@@ -101,8 +126,102 @@ def test_no_change_on_ten_minutes_of_steady_data(kicks):
     assert changes == []
 
 
+# --- the independent generator (daq.sim.independent: its own beams, stoppers, integrator, sensors) ---
+
+@pytest.fixture(scope="module")
+def generated():
+    from daq.sim.independent.regimes import regime_case
+
+    return {seed: regime_case(seed, segment_s=(10.0, 10.0)) for seed in GENERATED}
+
+
+def columns(case):
+    return np.column_stack([case.columns[k] for k in ("base", "tip1", "tip2")])
+
+
+def scored(case, x=None, gaps=None):
+    cfg = RegimeConfig(fs_hz=case.fs_hz, gap_m=gaps)
+    windows, changes = run_monitor(columns(case) if x is None else x, cfg=cfg)
+    t = np.array([w.t_s for w in windows])
+    codes = np.array([LABELS.index(w.label) for w in windows])
+    sc = score_regimes(t, codes, [(c.t_s, LABELS.index(c.regime)) for c in changes],
+                       case.truth_series["achieved"], case.fs_hz)
+    return sc, windows
+
+
+# The three seeds that generate fastest (10 s segments), as measured: seed: (share of windows right,
+# true changes, of them reported within 1 s, false changes). Seed 11 starts with beam 1 grazing a soft
+# one-sided stopper (2 % beyond its gap, 5 x the beam's stiffness) while beam 2 hits hard: the monitor
+# calls it localized-2 until the grazing beam hits properly (daq bench --regimes has the whole picture).
+GENERATED = {4: (1.0, 5, 5, 1), 11: (0.81, 7, 6, 4), 2: (1.0, 7, 7, 0)}
+
+
+@pytest.mark.parametrize("seed", list(GENERATED))
+def test_regimes_on_the_independent_generator(generated, seed):
+    case = generated[seed]
+    share, changes, in_time, false = GENERATED[seed]
+    sc, _ = scored(case)
+    assert len(sc.true_changes) == changes  # the programme went through the regimes
+    assert sc.share_right >= share, sc
+    assert sc.changes_in_time >= in_time, sc
+    assert sc.false_changes <= false, sc
+
+
+def test_a_sensor_mounted_upside_down_changes_nothing(generated):
+    """The tip's sign comes from the energy flow (a passive beam takes power from the base): flipping a
+    tip's sign flips the sign the monitor reports, and nothing else."""
+    case = generated[4]
+    _, windows = scored(case)
+    x = columns(case)
+    x[:, 2] *= -1
+    _, flipped = scored(case, x)
+    assert [w.label for w in flipped] == [w.label for w in windows]
+    late = [(w, f) for w, f in zip(windows, flipped) if w.t_s > 10]
+    assert all(f.beams[1].sign == -w.beams[1].sign for w, f in late)
+    for w, f in late:
+        assert f.beams[1].displacement_m == pytest.approx(w.beams[1].displacement_m, rel=1e-9)
+
+
+def test_no_false_change_on_a_steady_minute():
+    from daq.sim.independent.regimes import steady_case
+
+    case = steady_case(6, "beam2", minutes=1.0, fs_hz=500)
+    assert case.truth["regime_share"]["beam2"] > 0.99
+    sc, windows = scored(case)
+    assert sc.reported_changes == 0
+    assert sc.share_right == 1.0 and windows[0].label == "localized-2"  # the starting regime too
+
+
+def test_any_split_into_blocks_gives_the_same_output(generated):
+    """The stage is a pure function of (state, block): one block, or random ones, the same windows."""
+    x = columns(generated[2])
+    cfg = RegimeConfig(fs_hz=generated[2].fs_hz)
+    state, whole, ch_whole = regime_step(regime_start(cfg), x)
+    rng = np.random.default_rng(5)
+    state2, parts, ch_parts, pos = regime_start(cfg), [], [], 0
+    while pos < len(x):
+        k = int(rng.integers(1, 3000))
+        state2, w, c = regime_step(state2, x[pos:pos + k])
+        parts += w
+        ch_parts += c
+        pos += k
+    assert repr(parts) == repr(whole) and repr(ch_parts) == repr(ch_whole)  # repr: exact floats, NaN equal
+    assert state2.n_seen == state.n_seen == len(x)
+
+
+def test_true_changes_ignore_flicker():
+    codes = np.array([0] * 300 + [2, 0] * 20 + [2] * 300 + [3] * 50 + [2] * 300)
+    tc = true_changes(codes, fs_hz=100.0, min_run_s=1.0)
+    assert [(c.code, c.previous) for c in tc] == [(2, 0)]
+    assert tc[0].t_departure_s == pytest.approx(2.99) and tc[0].t_s == pytest.approx(3.40)
+
+
 def test_bad_config_and_input():
-    with pytest.raises(ValueError, match="hysteresis"):
-        RegimeMonitor(RegimeConfig(on_m_per_s2=0.2, off_m_per_s2=0.5))
+    with pytest.raises(ValueError, match="gap_m"):
+        regime_start(RegimeConfig(gap_m=(1e-3, -1.0)))
+    with pytest.raises(ValueError, match="window_s"):
+        regime_start(RegimeConfig(window_s=0.1, hop_s=0.25))
     with pytest.raises(ValueError, match="shape"):
         RegimeMonitor().step(np.zeros((10, 2)))
+    with pytest.raises(ValueError, match="NaN"):
+        RegimeMonitor().step(np.full((10, 3), np.nan))

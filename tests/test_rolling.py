@@ -6,6 +6,9 @@ import numpy as np
 import pytest
 
 from daq.sim.excitation import Excitation
+from scipy.signal import sosfiltfilt
+
+from ident.filters import design_highpass
 from ident.physical import integrate_band
 from daq.sim.rig import RigConfig, simulate_rig
 from ident.rig import RigParams
@@ -39,11 +42,12 @@ def linear_rig_fits():
     fits = []
     for k in range(0, len(x), 333):  # serial-read-sized blocks
         fits += ri.step(x[k:k + 333])
-    return p, fits, x
+    fits += ri.finish()
+    return p, fits, x, o.z
 
 
 def test_identified_stiffness_and_damping_match_the_rig(linear_rig_fits):
-    p, fits, _ = linear_rig_fits
+    p, fits, _, _ = linear_rig_fits
     assert len(fits) >= 9
     for beam, fit in zip((p.beam1, p.beam2), fits[-1].beams):
         w = 2 * np.pi * beam.natural_frequency_hz
@@ -57,14 +61,16 @@ def test_identified_stiffness_and_damping_match_the_rig(linear_rig_fits):
 
 
 def test_steady_data_gives_no_model_change_after_warm_up(linear_rig_fits):
-    _, fits, _ = linear_rig_fits
+    _, fits, _, _ = linear_rig_fits
     assert not any(b.changed for f in fits[3:] for b in f.beams)
 
 
 def test_fits_do_not_depend_on_how_the_stream_is_cut(linear_rig_fits):
     """Windows end on the hop grid (1 s) whatever the block sizes: the same fits for random blocks."""
-    _, fits, x = linear_rig_fits
-    assert np.allclose(np.diff([f.t_s for f in fits]), 1.0, rtol=0, atol=1e-12)
+    _, fits, x, _ = linear_rig_fits
+    final = [f for f in fits if f.final]
+    assert np.allclose(np.diff([f.t_s for f in final]), 1.0, rtol=0, atol=1e-12)
+    assert not fits[0].final and fits[1].final and fits[1].t_s == fits[0].t_s  # the first window is refined
     ri = RollingIdentifier(RollingConfig(degree=1))
     rng = np.random.default_rng(1)
     other, k = [], 0
@@ -72,7 +78,27 @@ def test_fits_do_not_depend_on_how_the_stream_is_cut(linear_rig_fits):
         n = int(rng.integers(1, 2500))
         other += ri.step(x[k:k + n])
         k += n
-    assert [f.t_s for f in other] == [f.t_s for f in fits]
+    other += ri.finish()
+    assert [(f.t_s, f.final) for f in other] == [(f.t_s, f.final) for f in fits]
     for a, b in zip(fits, other):
         for ba, bb in zip(a.beams, b.beams):
             assert ba.model.as_dict() == bb.model.as_dict()
+            assert np.array_equal(ba.coefficient_std, bb.coefficient_std)
+
+
+def test_uncertainty_and_backbone(linear_rig_fits):
+    """Each window carries its ensemble: the true terms always in, the natural frequency's spread far
+    below its error bound, and the amplitude is the simulated relative displacement's (sqrt 2 RMS)."""
+    p, fits, _, z_true = linear_rig_fits
+    fs = 2000.0
+    for fit in [f for f in fits if f.final][3:]:
+        for i, (beam, b) in enumerate(zip((p.beam1, p.beam2), fit.beams)):
+            names = b.model.library.names
+            assert b.inclusion[names.index("z"), 1] == 1.0 and b.inclusion[names.index("F"), 1] == 1.0
+            assert b.inclusion[names.index("v"), 0] == 1.0
+            assert 0 < b.natural_frequency_std_hz < 0.01 * beam.natural_frequency_hz
+            assert b.coefficient_std[names.index("z"), 1] > 0
+            # the simulated displacement in the integration's band (above 2 Hz), over the window's span
+            sl = slice(int(round((fit.t[0]) * fs)), int(round(fit.t[-1] * fs)) + 1)
+            zb = sosfiltfilt(design_highpass(fs, 2.0, 2), z_true[:, i])[sl]
+            assert b.amplitude_m == pytest.approx(np.sqrt(2) * np.sqrt(np.mean(zb**2)), rel=0.03)

@@ -11,9 +11,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from clitools import run_main
+from daq import bench_regimes
 from daq.cli import main as daq_main
 from daq.safeio import Output, PartFile, check_outputs, safe_folder, safe_output, same_file
 from ident.cli.main import main as ident_main
@@ -237,3 +239,23 @@ def test_daq_sim_link_is_its_own_and_survives_nothing_else(tmp_path):
     code, out, err, tb = run_main(daq_main, ["sim", "--link", stale, "--duration", "0.2"])
     assert code == 0, err
     assert not os.path.lexists(stale)
+
+
+def test_the_regime_benchmark_cache_is_written_whole_and_never_rewritten(tmp_path, monkeypatch):
+    """daq bench --regimes --cache DIR: a generated case is written as one file, beside and renamed; a case
+    found there is read, not generated again; a file there that is not a case is refused, not replaced."""
+    made = []
+
+    def generate(kind, seed, regime, minutes, fs_hz):
+        made.append(seed)
+        return bench_regimes.CaseData(500.0, np.arange(30.0).reshape(10, 3), np.zeros(10, int), {"seed": seed})
+
+    monkeypatch.setattr(bench_regimes, "_generate", generate)
+    a = bench_regimes.load_case("regimes", 7, cache=tmp_path)
+    b = bench_regimes.load_case("regimes", 7, cache=tmp_path)
+    assert made == [7] and os.listdir(tmp_path) == ["regimes_7.npz"]
+    assert b.truth == {"seed": 7} and np.array_equal(a.x, b.x) and b.fs_hz == 500.0
+    (tmp_path / "regimes_8.npz").write_bytes(PRECIOUS)
+    with pytest.raises(ValueError, match="not a case this benchmark wrote"):
+        bench_regimes.load_case("regimes", 8, cache=tmp_path)
+    assert (tmp_path / "regimes_8.npz").read_bytes() == PRECIOUS and made == [7]

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..filters import design_lowpass, lowpass_block, lowpass_start
+from ..library import PolynomialForcingLibrary
+from ..simulate import PARALLEL_MIN_WORK, simulate
 from .regimes import RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow
 from .rolling import RollingConfig, RollingIdentifier, WindowFit
 
@@ -52,6 +54,63 @@ def rolling_config(fs_hz: float, window_s: float = 4.0, hop_s: float = 1.0) -> R
     return RollingConfig(fs_hz=fs_hz, window_s=window_s, hop_s=hop_s)
 
 
+def _per_term(model, values: np.ndarray, keep: np.ndarray) -> dict[str, dict[str, float]]:
+    """{"v'": {term: value}} for the terms where keep is true, the model's equation names."""
+    names = model.library.names
+    return {f"{s}'": {names[k]: float(values[k, i]) for k in range(len(names)) if keep[k, i]}
+            for i, s in enumerate(model.state_names)}
+
+
+def model_records(fit: WindowFit) -> list[dict]:
+    """One plain-data record per beam of a rolling-window fit: the model with its uncertainty.
+
+    ``t`` is the window's end in data time (seconds since the start of the stream); ``coefficients``
+    the model's non-zero terms; ``coefficient_std`` and ``inclusion_probability`` the ensemble's spread
+    and the share of its models holding each term (every term some model holds); ``amplitude_m`` and
+    ``natural_frequency_hz`` are the window's point on the beam's backbone. A window that needed a new
+    model has two records: the sweep's (``final`` false) and the refined one that follows.
+    """
+    out = []
+    for i, b in enumerate(fit.beams):
+        c = b.model.coefficients
+        held = (b.inclusion > 0) | (c != 0)
+        out.append({"t": fit.t_s, "beam": i + 1, "equations": b.model.equations(), "coefficients": b.model.as_dict(),
+                    "coefficient_std": _per_term(b.model, b.coefficient_std, held),
+                    "inclusion_probability": _per_term(b.model, b.inclusion, held),
+                    "active": list(b.active), "integration_nrmse": b.error,
+                    "natural_frequency_hz": b.natural_frequency_hz,
+                    "natural_frequency_std_hz": b.natural_frequency_std_hz, "amplitude_m": b.amplitude_m,
+                    "stiffness_per_mass": b.stiffness_per_mass, "changed": b.changed, "final": fit.final})
+    return out
+
+
+def warm_up() -> None:
+    """Compile the numba kernels the rolling identification uses (RK4 integration, serial and parallel),
+    on tiny inputs: numba caches the machine code on disk, so only the first run after an install pays
+    (seconds); callers run this before data flows so that no window waits for the compiler."""
+    lib = PolynomialForcingLibrary(2, 3, True, ("z", "v"))
+    coefs = np.zeros((lib.n_terms, 2))
+    coefs[lib.names.index("v"), 0] = 1.0
+    coefs[lib.names.index("z"), 1] = -1.0
+    t = np.linspace(0.0, 1.0, 64)
+    simulate(lib, coefs, np.zeros(2), t, np.zeros_like(t))
+    n_batch = PARALLEL_MIN_WORK // (len(t) - 1) + 1
+    simulate(lib, np.repeat(coefs[None], n_batch, axis=0), np.zeros(2), t, np.zeros_like(t))
+
+
+def parse_gaps(text: str | None) -> tuple[float, float] | None:
+    """--gaps G1,G2: the tips' stopper gaps in metres for the regime monitor (None: it learns them)."""
+    if text is None:
+        return None
+    try:
+        gaps = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"--gaps takes two gaps in metres, as 0.0027,0.0027; got {text!r}") from None
+    if len(gaps) != 2 or not all(np.isfinite(g) and g > 0 for g in gaps):
+        raise ValueError(f"--gaps takes two positive gaps in metres (tip 1, tip 2), as 0.0027,0.0027; got {text!r}")
+    return gaps
+
+
 class Pipeline:
     def __init__(self, cfg: PipelineConfig = PipelineConfig()):
         if cfg.regime.fs_hz != cfg.fs_hz or cfg.rolling.fs_hz != cfg.fs_hz:
@@ -77,7 +136,17 @@ class Pipeline:
         rel = y[:, 1:] - y[:, :1]
         windows, changes = self.monitor.step(x)
         fits = self.rolling.step(x) if self.rolling is not None else []
-        events = [{"t": c.t_s, "kind": "regime", "regime": c.regime, "previous": c.previous} for c in changes]
+        return self._output(t, x, y, rel, windows, changes, fits)
+
+    def finish(self) -> StepOutput:
+        """At the end of a stream: what is still pending (the last window's refined fit, if any)."""
+        fits = self.rolling.finish() if self.rolling is not None else []
+        e = np.zeros((0, 3))
+        return self._output(np.zeros(0), e, e, np.zeros((0, 2)), [], [], fits)
+
+    def _output(self, t, x, y, rel, windows, changes, fits) -> StepOutput:
+        events = [{"t": c.t_s, "kind": "regime", "regime": c.regime, "previous": c.previous,
+                   "confidence": c.confidence} for c in changes]
         for f in fits:
             for i, b in enumerate(f.beams):
                 if b.changed:

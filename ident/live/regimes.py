@@ -1,30 +1,77 @@
-"""Regime monitor: free (``linear``), one beam hitting (``localized-1``, ``localized-2``), both.
+"""Regime monitor: per beam, free or hitting its stoppers, from physics every rig has.
 
-Decision feature: impact energy, the RMS of each *unfiltered* tip signal above
-``hf_cutoff_hz`` (100 Hz) over a sliding window. Contact with a stiff stopper
-rings at a few hundred hertz (here about 250 Hz), while the free motion at
-12.3 Hz and its harmonics stay below: on the default rig the feature is
-0.02 m/s^2 (sensor noise) without contact and about 9 m/s^2 with it. Each beam's
-"hitting" flag switches on above ``on_m_per_s2`` and off below ``off_m_per_s2``
-(hysteresis), and a new label must persist for ``dwell`` consecutive windows
-before it is reported, so the monitor does not chatter. Supporting features
-reported with every window: the tip amplitude ratio (RMS tip1 / tip2 below
-50 Hz) and each tip's phase to the base at the dominant frequency.
+Regimes: free (``linear``), one beam hitting (``localized-1``, ``localized-2``), both
+(``impacting-both``). Each beam is judged on its own, with a probability, from features
+that are ratios of quantities the data itself provides, so the decision carries from
+one rig to another (stoppers soft or rigid, one- or two-sided, 500 Hz to 5 kHz, any noise
+level). Per window (``window_s``, every ``hop_s``), with f the drive frequency (the base's
+spectral peak) and a Hann-windowed spectrum of every channel:
 
-Streaming: ``RegimeMonitor.step(block)`` takes any block of samples and
-returns the windows completed in it; the split does not matter.
+- **distortion**: the power of the tip's acceleration in [1.5 f, 10.5 f] (the harmonics) and in
+  [10.5 f, 0.3 fs] (impact ringing, reported apart as ``impact_ratio`` and ``impact_rms``), each
+  above the channel's noise floor, over the power at the fundamental. The floor of white sensor
+  noise is a low quantile of the bands' bins, the lower of this window's and the 10th percentile
+  of the last 400 windows' (the noise is stationary; a window full of impacts raises its own).
+  Removed: what the base's own harmonics would put into the tip, and the share of the other
+  beam's excess the coupling carries over (``cross_talk`` of its harmonic power,
+  ``cross_talk_impact`` of its impact power: the beams' higher modes are alike). A linear beam
+  driven by a sine answers with that sine alone; a stopper folds the motion and puts power at
+  the harmonics (odd ones for two-sided stoppers, ``odd_distortion``; even ones too for
+  one-sided), and a stiff one rings at the beam's higher modes. The acceleration weights
+  harmonic n by n^2, which is what makes a soft stopper's small distortion of the displacement
+  visible. The decision reads log10 of the distortion against ``distortion_on``, and only where
+  the excess is significant against the floor (a beam that barely moves says nothing either
+  way);
+- **displacement amplitude against the gap**: the relative displacement at the drive
+  frequency, Z = |tip - base| / (2 pi f)^2 at f, against the stopper gap learned online
+  (between the largest amplitudes the distortion called free and the smallest it called
+  hitting; far below every amplitude seen hitting a beam is free); with the gap from the
+  config (``gap_m``), the peak of the displacement waveform rebuilt from the first eight
+  harmonics (a stopper clips the motion: the fundamental of a beam on a stiff stopper stays
+  below the gap);
+- **stiffness**: harmonic balance of the beam's first mode at the drive frequency,
+  z'' + 2 zeta w z' + w^2 z = -a_base gives w_eq^2 = w^2 Re(T / R), T the tip's and R the
+  relative acceleration phasor: the describing-function (equivalent linear) natural
+  frequency of this window, with the one learned in windows the distortion called free.
+  Reported, not weighed: the coupling and the beating after a drive change move it by
+  several per cent, as much as a soft stopper does. The pairs (amplitude, w_eq) are the
+  beam's backbone as this window sees it;
+- **phase to the base** and the **amplitude ratio** of the tips (localisation) are
+  reported with every window.
+
+Sign of each tip against the base: a passive beam takes power from the base, so the
+mean of a_base times the tip's absolute velocity is negative, Im(conj(B) T) < 0 at the
+drive frequency; the monitor accumulates that product over the stream and flips a tip
+whose sign is the other way (an accelerometer mounted upside down), so relative motion,
+phase and stiffness come out right without a calibration sign.
+
+The per-beam log-odds is ``prior`` plus the evidences: the distortion's log10 against
+``distortion_on`` per ``distortion_scale`` decades (clipped to +-3), the learned gap's (clipped
+to +-1.5, down to -3 far below the amplitudes seen hitting) or the config's (-2 .. +3). The
+beam's probability of hitting is the logistic, its confidence max(p, 1 - p). A beam switches to
+hitting above p = 0.5 + ``hysteresis`` and back below 0.5 - ``hysteresis``, and a new regime must
+hold for ``dwell`` windows before it is reported; the first window reports the starting regime.
+The thresholds were set on generated rigs (seeds 0-30 of daq.sim.independent) other than those
+``daq bench --regimes`` reports (seeds from 1000).
+
+Streaming: ``regime_step(state, block) -> (state, windows, changes)`` is a pure function;
+windows end on multiples of the hop counted from the first sample, so any split of the
+stream into blocks gives the same output (tests/test_regimes.py proves it).
+``RegimeMonitor`` holds the state for callers that prefer an object.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
-from scipy.signal import sosfilt
-
-from ..filters import design_highpass, design_lowpass
 
 LABELS = ("linear", "localized-1", "localized-2", "impacting-both")
+PEAK_HARMONICS = 8  # harmonics of the drive in the reconstructed displacement waveform
+LEARNED_CAP = 1.5  # largest log-odds a learned gap may give
+LEARN_WINDOWS = 400  # confident windows kept per beam for the learned gap and stiffness (100 s at 0.25 s)
+FLOOR_QUANTILE = 0.2
 
 
 def label_of(hit1: bool, hit2: bool) -> str:
@@ -36,10 +83,41 @@ class RegimeConfig:
     fs_hz: float = field(default=2000.0, metadata={"gt": 0.0})
     window_s: float = field(default=0.5, metadata={"gt": 0.0})
     hop_s: float = field(default=0.25, metadata={"gt": 0.0})
-    hf_cutoff_hz: float = field(default=100.0, metadata={"gt": 0.0})
-    on_m_per_s2: float = field(default=1.0, metadata={"gt": 0.0})
-    off_m_per_s2: float = field(default=0.3, metadata={"gt": 0.0})
+    gap_m: tuple[float, float] | None = None  # tip-equivalent stopper gaps from the config; None: learn them
     dwell: int = field(default=2, metadata={"min": 1})
+    hysteresis: float = field(default=0.2, metadata={"min": 0.0, "max": 0.49})
+    distortion_on: float = field(default=3e-4, metadata={"gt": 0.0})  # distortion power ratio at p = 0.5
+    distortion_scale: float = field(default=0.5, metadata={"gt": 0.0})  # decades per unit of log-odds
+    significance: float = field(default=0.5, metadata={"gt": 0.0})  # excess over the band's noise power
+    gap_scale: float = field(default=0.03, metadata={"gt": 0.0})  # log amplitude / gap per unit log-odds
+    min_frequency_hz: float = field(default=2.0, metadata={"gt": 0.0})
+    # the share of one beam's excess power that the coupling may carry into the other: small at the
+    # harmonics (far above the first modes), larger in the impact band (the beams' higher modes are alike)
+    cross_talk: float = field(default=0.05, metadata={"min": 0.0})
+    cross_talk_impact: float = field(default=0.3, metadata={"min": 0.0})
+    prior: float = -1.0  # log-odds of hitting before any evidence
+
+
+@dataclass(frozen=True)
+class BeamState:
+    """One beam in one window: the features, the evidence and the decision."""
+
+    hitting: bool  # after hysteresis
+    probability: float  # of hitting, this window
+    confidence: float  # max(p, 1 - p)
+    displacement_m: float  # relative displacement amplitude at the drive frequency
+    peak_displacement_m: float  # peak of the relative displacement waveform (harmonics 1-8 of the drive)
+    gap_m: float  # from the config, or learned (nan until learned)
+    distortion: float  # harmonic-band power over the fundamental's, floor and base removed
+    odd_distortion: float  # the part at 3 f and 5 f
+    impact_ratio: float  # the part above 10.5 f (impact ringing)
+    significant: bool  # the excess stands out of the noise floor
+    natural_frequency_hz: float  # harmonic-balance (equivalent linear) natural frequency
+    free_frequency_hz: float  # learned from windows judged free (nan until learned)
+    phase_deg: float  # tip against the base at the drive frequency (tip lags: negative)
+    sign: int  # the tip's sign against the base, from the energy flow
+    evidence: tuple[float, float, float]  # log-odds from distortion, amplitude/gap, stiffness
+    impact_rms: float  # m/s^2 in the impact band above the floor
 
 
 @dataclass(frozen=True)
@@ -47,9 +125,22 @@ class RegimeWindow:
     t_s: float  # end of the window, seconds since the start of the stream
     label: str  # the reported (debounced) regime
     raw_label: str  # this window's label before the dwell
-    impact_rms: tuple[float, float]  # m/s^2 above hf_cutoff_hz, tip1 and tip2
-    amplitude_ratio: float  # RMS tip1 / tip2 below 50 Hz
-    phase_deg: tuple[float, float]  # tip1, tip2 against the base at the dominant frequency
+    drive_frequency_hz: float
+    beams: tuple[BeamState, BeamState]
+    amplitude_ratio: float  # displacement amplitude tip1 / tip2 (localisation)
+
+    @property
+    def impact_rms(self) -> tuple[float, float]:
+        return (self.beams[0].impact_rms, self.beams[1].impact_rms)
+
+    @property
+    def phase_deg(self) -> tuple[float, float]:
+        return (self.beams[0].phase_deg, self.beams[1].phase_deg)
+
+    @property
+    def confidence(self) -> float:
+        """The regime's confidence: the product of the beams' confidences."""
+        return self.beams[0].confidence * self.beams[1].confidence
 
 
 @dataclass(frozen=True)
@@ -57,95 +148,290 @@ class RegimeChange:
     t_s: float
     regime: str
     previous: str
+    confidence: float = float("nan")
+
+
+@dataclass(frozen=True)
+class RegimeState:
+    """Everything the monitor carries from one block to the next (treated as immutable)."""
+
+    cfg: RegimeConfig
+    buf: np.ndarray  # (<= n_window, 3) the last samples
+    since_hop: int  # samples since the last window end
+    n_seen: int
+    power_flow: np.ndarray  # (2,) accumulated Im(conj(B) T_i): negative for a tip with the base's sign
+    floors: np.ndarray  # (k, 3) recent windows' spectral floors per bin (the sensor noise is their low quantile)
+    free_z: tuple[np.ndarray, np.ndarray]  # displacement amplitudes of windows the distortion called free
+    hit_z: tuple[np.ndarray, np.ndarray]  # ... called hitting
+    free_w: tuple[np.ndarray, np.ndarray]  # harmonic-balance natural frequencies of free windows
+    hit: tuple[bool, bool]
+    label: str
+    candidate: str
+    candidate_count: int
+    started: bool
+
+
+def regime_start(cfg: RegimeConfig = RegimeConfig()) -> RegimeState:
+    if cfg.window_s < cfg.hop_s:
+        raise ValueError(f"window_s {cfg.window_s} must not be shorter than hop_s {cfg.hop_s}")
+    if cfg.gap_m is not None and not (len(cfg.gap_m) == 2 and all(g > 0 for g in cfg.gap_m)):
+        raise ValueError(f"gap_m must be two positive gaps in metres (tip 1, tip 2), got {cfg.gap_m}")
+    if int(round(cfg.window_s * cfg.fs_hz)) < 32:
+        raise ValueError(f"window_s {cfg.window_s} s holds fewer than 32 samples at {cfg.fs_hz} Hz")
+    empty = (np.zeros(0), np.zeros(0))
+    return RegimeState(cfg, np.zeros((0, 3)), 0, 0, np.zeros(2), np.zeros((0, 3)), empty, empty, empty,
+                       (False, False), LABELS[0],
+                       LABELS[0], 0, False)
+
+
+def regime_step(state: RegimeState, block: np.ndarray) -> tuple[RegimeState, list[RegimeWindow], list[RegimeChange]]:
+    """Feed a block (n, 3) of unfiltered base, tip1, tip2 [m/s^2]; the windows completed in it."""
+    x = np.asarray(block, float)
+    if x.ndim != 2 or x.shape[1] != 3:
+        raise ValueError(f"regime monitor needs blocks of shape (n, 3), got {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("block contains NaN or inf")
+    cfg = state.cfg
+    n_win = int(round(cfg.window_s * cfg.fs_hz))
+    n_hop = max(1, int(round(cfg.hop_s * cfg.fs_hz)))
+    windows, changes = [], []
+    buf, since, n_seen = state.buf, state.since_hop, state.n_seen
+    i = 0
+    while i < len(x):
+        piece = x[i:i + n_hop - since]
+        i += len(piece)
+        buf = np.concatenate([buf, piece])[-n_win:]
+        since += len(piece)
+        n_seen += len(piece)
+        if since == n_hop:
+            since = 0
+            if len(buf) == n_win:
+                state = replace(state, buf=buf, since_hop=since, n_seen=n_seen)
+                state, w, ch = _window(state, buf, n_seen / cfg.fs_hz)
+                windows.append(w)
+                if ch is not None:
+                    changes.append(ch)
+    state = replace(state, buf=buf, since_hop=since, n_seen=n_seen)
+    return state, windows, changes
 
 
 class RegimeMonitor:
+    """The pure stage with its state held: ``step(block) -> (windows, changes)``."""
+
     def __init__(self, cfg: RegimeConfig = RegimeConfig()):
-        if cfg.off_m_per_s2 >= cfg.on_m_per_s2:
-            raise ValueError("off_m_per_s2 must be below on_m_per_s2 (that gap is the hysteresis)")
-        if cfg.hf_cutoff_hz >= cfg.fs_hz / 2:
-            raise ValueError(f"hf_cutoff_hz {cfg.hf_cutoff_hz} must be below Nyquist {cfg.fs_hz / 2}")
+        self.state = regime_start(cfg)
         self.cfg = cfg
-        self.hop = max(1, int(round(cfg.hop_s * cfg.fs_hz)))
-        self.n_hops = max(1, int(round(cfg.window_s / cfg.hop_s)))
-        self._hp = design_highpass(cfg.fs_hz, cfg.hf_cutoff_hz, 4)
-        self._lp = design_lowpass(cfg.fs_hz, 50.0, 4)
-        self._zhp = np.zeros((self._hp.shape[0], 2, 2))
-        self._zlp = np.zeros((self._lp.shape[0], 2, 3))
-        self._pend_hf = np.zeros((0, 2))
-        self._pend_lf = np.zeros((0, 3))
-        self._hops_hf: list[np.ndarray] = []
-        self._hops_lf: list[np.ndarray] = []
-        self.n_seen = 0
-        self.hit = [False, False]
-        self.label = "linear"
-        self._cand = "linear"
-        self._cand_count = 0
-        self.started = False
 
     def step(self, block: np.ndarray) -> tuple[list[RegimeWindow], list[RegimeChange]]:
-        """block: (n, 3) unfiltered base, tip1, tip2 [m/s^2]."""
-        x = np.asarray(block, float)
-        if x.ndim != 2 or x.shape[1] != 3:
-            raise ValueError(f"regime monitor needs blocks of shape (n, 3), got {x.shape}")
-        if not np.all(np.isfinite(x)):
-            raise ValueError("block contains NaN or inf")
-        if len(x) == 0:
-            return [], []
-        hf, self._zhp = sosfilt(self._hp, x[:, 1:], axis=0, zi=self._zhp)
-        lf, self._zlp = sosfilt(self._lp, x, axis=0, zi=self._zlp)
-        self._pend_hf = np.concatenate([self._pend_hf, hf])
-        self._pend_lf = np.concatenate([self._pend_lf, lf])
-        windows, changes = [], []
-        while len(self._pend_hf) >= self.hop:
-            self._hops_hf.append(self._pend_hf[: self.hop])
-            self._hops_lf.append(self._pend_lf[: self.hop])
-            self._pend_hf = self._pend_hf[self.hop:]
-            self._pend_lf = self._pend_lf[self.hop:]
-            self._hops_hf = self._hops_hf[-self.n_hops:]
-            self._hops_lf = self._hops_lf[-self.n_hops:]
-            self.n_seen += self.hop
-            if len(self._hops_hf) < self.n_hops:
-                continue
-            w, ch = self._window(np.concatenate(self._hops_hf), np.concatenate(self._hops_lf))
-            windows.append(w)
-            if ch:
-                changes.append(ch)
+        self.state, windows, changes = regime_step(self.state, block)
         return windows, changes
 
-    def _window(self, hf: np.ndarray, lf: np.ndarray) -> tuple[RegimeWindow, RegimeChange | None]:
-        cfg = self.cfg
-        t_end = self.n_seen / cfg.fs_hz
-        rms = np.sqrt(np.mean(hf**2, axis=0))
-        for i in range(2):
-            if self.hit[i] and rms[i] < cfg.off_m_per_s2:
-                self.hit[i] = False
-            elif not self.hit[i] and rms[i] > cfg.on_m_per_s2:
-                self.hit[i] = True
-        raw = label_of(*self.hit)
-        if raw == self._cand:
-            self._cand_count += 1
+    @property
+    def label(self) -> str:
+        return self.state.label
+
+
+@dataclass(frozen=True)
+class _Spectral:
+    f_hz: float
+    phasors: np.ndarray  # (3,) complex amplitudes at f
+    harmonics: np.ndarray  # (H, 3) complex amplitudes at n f, n = 1 .. H (H = PEAK_HARMONICS, below 0.45 fs)
+    fundamental: np.ndarray  # (3,) power in [0.5 f, 1.5 f]
+    harmonic: np.ndarray  # (3,) power in [1.5 f, 10.5 f] (distortion)
+    odd: np.ndarray  # (3,) power within f / 4 of 3 f and 5 f
+    impact: np.ndarray  # (3,) power in [10.5 f, 0.3 fs] (impact ringing)
+    bins: tuple[int, int, int]  # bins in the harmonic band, at the odd harmonics, in the impact band
+    floor: np.ndarray  # (3,) this window's floor per bin (a low quantile of both bands)
+    power_scale: float  # one-sided power in (m/s^2)^2 per unit of summed bins
+
+
+@lru_cache(maxsize=16)
+def _window_arrays(n: int, fs_hz: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Hann window, sample times and the window's power normalisation, per window length and rate."""
+    w = np.hanning(n)
+    return w, np.arange(n) / fs_hz, float(np.sum(w**2))
+
+
+def spectral_features(x: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) -> _Spectral:
+    """Drive frequency, phasors and band powers of one window (n, 3)."""
+    n = len(x)
+    w, t, w2 = _window_arrays(n, float(fs_hz))
+    x = x - x.mean(axis=0)
+    xw = x * w[:, None]
+    pad = 4
+    nfft = pad * n
+    spec = np.fft.rfft(xw, nfft, axis=0)
+    p = spec.real**2 + spec.imag**2
+    df = fs_hz / nfft
+    top = 0.3 * fs_hz
+    lo = int(np.ceil(min_frequency_hz / df))
+    hi = max(lo + 1, int(top / df))
+    k = lo + int(np.argmax(p[lo:hi, 0]))
+    delta = 0.0
+    if 0 < k < p.shape[0] - 1:  # parabolic interpolation of the log peak
+        a, b, c = np.log(p[k - 1:k + 2, 0] + 1e-300)
+        den = a - 2 * b + c
+        if den < 0:
+            delta = 0.5 * (a - c) / den
+    f = float((k + delta) * df)
+    e1 = np.exp(-2j * np.pi * f * t)
+    n_h = max(1, min(PEAK_HARMONICS, int(0.45 * fs_hz / f))) if f > 0 else 1
+    basis = np.cumprod(np.repeat(e1[:, None], n_h, axis=1), axis=1)  # exp(-2 pi i n f t), n = 1 .. H
+    harmonics = 2 * (basis.T @ xw) / w.sum()
+    phasors = harmonics[0]
+
+    def index(freq_hz: float) -> int:  # first bin at or above freq_hz
+        return min(p.shape[0], int(np.ceil(freq_hz / df - 1e-9)))
+
+    i_f, i_h, i_i, i_top = index(0.5 * f), index(1.5 * f), index(min(10.5 * f, top)), index(top)
+    i_i = max(i_h, i_i)
+    fund = p[i_f:i_h].sum(axis=0)
+    harm = p[i_h:i_i].sum(axis=0)
+    imp = p[i_i:i_top].sum(axis=0)
+    odd = np.zeros(3)
+    n_odd = 0
+    for m in (3, 5):
+        a0, a1 = max(index((m - 0.25) * f), i_h), min(index((m + 0.25) * f), i_i)
+        if a1 > a0:
+            odd += p[a0:a1].sum(axis=0)
+            n_odd += a1 - a0
+    band = p[i_h:i_top]
+    floor = _low_quantile(band, FLOOR_QUANTILE) / -np.log(1 - FLOOR_QUANTILE) if len(band) else np.zeros(3)
+    scale = 2.0 / (n * w2 * pad)
+    return _Spectral(f, phasors, harmonics, fund, harm, odd, imp, (i_i - i_h, n_odd, i_top - i_i), floor, scale)
+
+
+def _low_quantile(a: np.ndarray, q: float) -> np.ndarray:
+    """The q-quantile (lower order statistic) of each column, by partition (cheaper than np.quantile)."""
+    k = min(len(a) - 1, int(q * (len(a) - 1)))
+    return np.partition(a, k, axis=0)[k]
+
+
+def _logistic(s: float) -> float:
+    return float(1.0 / (1.0 + np.exp(-s)))
+
+
+def _evidence(power: float, noise: float, fund: float, cfg: RegimeConfig) -> tuple[float, float, bool]:
+    """(ratio to the fundamental, log-odds, significant) of an excess power over a band's noise power."""
+    excess = power - noise
+    ratio = excess / fund
+    if excess > cfg.significance * noise:
+        e = float(np.clip(np.log10(max(ratio, 1e-9) / cfg.distortion_on) / cfg.distortion_scale, -3, 3))
+        return ratio, e, True
+    hidden = max(noise * cfg.significance, 0.0) / fund  # the most the noise could hide
+    return ratio, float(np.clip(np.log10(max(hidden, 1e-12) / cfg.distortion_on) / cfg.distortion_scale, -3, 0)), False
+
+
+def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeState, RegimeWindow, RegimeChange | None]:
+    cfg = state.cfg
+    sp = spectral_features(x, cfg.fs_hz, cfg.min_frequency_hz)
+    f = sp.f_hz
+    omega = 2 * np.pi * f
+    base = sp.phasors[0]
+    flow = state.power_flow + np.array([np.imag(np.conj(base) * sp.phasors[1 + i]) for i in range(2)])
+    signs = tuple(1 if v <= 0 else -1 for v in flow)
+    floors = np.vstack([state.floors, sp.floor[None, :]])[-LEARN_WINDOWS:]
+    floor = np.minimum(sp.floor, _low_quantile(floors, 0.1))  # sensor noise: stationary, the quiet windows'
+    nh, nodd, ni = sp.bins
+    # what the base's own distortion would put into a tip (transmissibility above resonance <= about 1)
+    base_h = max(0.0, float(sp.harmonic[0] - floor[0] * nh))
+    base_i = max(0.0, float(sp.impact[0] - floor[0] * ni))
+    beams, hits = [], []
+    free_z, hit_z, free_w = list(state.free_z), list(state.hit_z), list(state.free_w)
+    zs = []
+    # excess powers of both tips above the floor, the base's share removed
+    ex_h = np.array([float(sp.harmonic[j] - floor[j] * nh) - base_h for j in (1, 2)])
+    ex_i = np.array([float(sp.impact[j] - floor[j] * ni) - base_i for j in (1, 2)])
+    for i in range(2):
+        j = 1 + i
+        o = 1 - i
+        tip = signs[i] * sp.phasors[j]
+        rel = tip - base
+        z = float(abs(rel) / omega**2) if omega > 0 else 0.0
+        zs.append(z)
+        w2 = omega**2 * float(np.real(tip / rel)) if abs(rel) > 0 else float("nan")
+        fn = float(np.sqrt(w2) / (2 * np.pi)) if w2 > 0 else float("nan")
+        phase = float(np.degrees(np.angle(tip / base))) if abs(base) > 0 else float("nan")
+        fund = max(float(sp.fundamental[j]), 1e-300)
+        # what the other beam's distortion puts into this one through the coupling
+        own_h = ex_h[i] - cfg.cross_talk * max(ex_h[o], 0.0)
+        own_i = ex_i[i] - cfg.cross_talk_impact * max(ex_i[o], 0.0)
+        noise_h, noise_i = float(floor[j]) * nh, float(floor[j]) * ni
+        d_h, e_h, sig_h = _evidence(own_h, noise_h, fund, cfg)
+        d_i, e_i, sig_i = _evidence(own_i, noise_i, fund, cfg) if ni else (0.0, -3.0, False)
+        odd = (float(sp.odd[j]) - float(floor[j]) * nodd) / fund
+        e_d = max(e_h, e_i)
+        significant = sig_h or sig_i
+        distortion = max(d_h, 0.0) + max(d_i, 0.0)
+        peak = _peak_displacement(signs[i] * sp.harmonics[:, j] - sp.harmonics[:, 0], omega)
+        # evidence 2: amplitude against the gap
+        if cfg.gap_m is not None:  # the waveform's peak (a stopper clips it: its fundamental stays below the gap)
+            gap = float(cfg.gap_m[i])
+            e_a = float(np.clip(np.log(peak / gap) / cfg.gap_scale, -2.0, 3.0)) if peak > 0 else -2.0
         else:
-            self._cand, self._cand_count = raw, 1
-        change = None
-        if not self.started:
-            self.started = True
-            self.label = raw
-            self._cand_count = cfg.dwell
-        elif raw != self.label and self._cand_count >= cfg.dwell:
-            change = RegimeChange(t_end, raw, self.label)
-            self.label = raw
-        lf_rms = np.sqrt(np.mean(lf**2, axis=0))
-        ratio = float(lf_rms[1] / lf_rms[2]) if lf_rms[2] > 0 else float("inf")
-        phases = _phases(lf, cfg.fs_hz)
-        return RegimeWindow(t_end, self.label, raw, (float(rms[0]), float(rms[1])), ratio, phases), change
+            gap, e_a = _gap_evidence(z, free_z[i], hit_z[i], cfg)
+        # evidence 3: stiffness against the free beam's (reported; not weighed: coupling and beating move it)
+        f_free = float(_low_quantile(free_w[i], 0.5)) / (2 * np.pi) if len(free_w[i]) >= 8 else float("nan")
+        e_k = 0.0  # reported, not weighed (see the module's docstring)
+        score = cfg.prior + e_d + e_a + e_k
+        p = _logistic(score)
+        was = state.hit[i]
+        hit = (p > 0.5 - cfg.hysteresis) if was else (p > 0.5 + cfg.hysteresis)
+        hits.append(hit)
+        # learning from the distortion alone (never from the decision it feeds), and a hitting amplitude only
+        # where this beam's excess is not the other's seen through the coupling
+        if e_d >= 2.0 and ex_h[i] + ex_i[i] >= 0.5 * (ex_h[o] + ex_i[o]):
+            hit_z[i] = np.append(hit_z[i], z)[-LEARN_WINDOWS:]
+        elif e_d <= -2.0 and fund > 10 * noise_h:
+            free_z[i] = np.append(free_z[i], z)[-LEARN_WINDOWS:]
+            if np.isfinite(fn):
+                free_w[i] = np.append(free_w[i], 2 * np.pi * fn)[-LEARN_WINDOWS:]
+        impact_rms = float(np.sqrt(max(d_i, 0.0) * fund * sp.power_scale))
+        beams.append(BeamState(hit, p, max(p, 1 - p), z, peak, gap, distortion, odd, max(d_i, 0.0), significant, fn,
+                               f_free, phase, signs[i], (e_d, e_a, e_k), impact_rms))
+    raw = label_of(*hits)
+    cand, count = (raw, state.candidate_count + 1) if raw == state.candidate else (raw, 1)
+    change = None
+    label = state.label
+    if not state.started:
+        label, count = raw, cfg.dwell
+    elif raw != label and count >= cfg.dwell:
+        change = RegimeChange(t_end, raw, label, beams[0].confidence * beams[1].confidence)
+        label = raw
+    ratio = zs[0] / zs[1] if zs[1] > 0 else float("inf")
+    window = RegimeWindow(t_end, label, raw, f, (beams[0], beams[1]), ratio)
+    state = replace(state, power_flow=flow, floors=floors, free_z=tuple(free_z), hit_z=tuple(hit_z),
+                    free_w=tuple(free_w), hit=(hits[0], hits[1]), label=label, candidate=cand,
+                    candidate_count=count, started=True)
+    return state, window, change
 
 
-def _phases(lf: np.ndarray, fs: float) -> tuple[float, float]:
-    """Phase of each tip against the base at the base's dominant frequency, degrees."""
-    spec = np.fft.rfft(lf * np.hanning(len(lf))[:, None], axis=0)
-    k = int(np.argmax(np.abs(spec[1:, 0]))) + 1
-    ref = spec[k, 0]
-    if abs(ref) == 0:
-        return (float("nan"), float("nan"))
-    return (float(np.degrees(np.angle(spec[k, 1] / ref))), float(np.degrees(np.angle(spec[k, 2] / ref))))
+def _peak_displacement(rel_acc: np.ndarray, omega: float) -> float:
+    """Peak |z| over a period of the displacement whose acceleration harmonics are rel_acc (phasors at n w):
+    z_n = -a_n / (n w)^2, evaluated on 128 phases."""
+    if not omega > 0:
+        return 0.0
+    n = np.arange(1, len(rel_acc) + 1)
+    zn = -rel_acc / (n * omega) ** 2
+    theta = np.linspace(0.0, 2 * np.pi, 128, endpoint=False)
+    return float(np.max(np.abs(np.real(np.exp(1j * np.outer(theta, n)) @ zn))))
+
+
+def _gap_evidence(z: float, free: np.ndarray, hit: np.ndarray, cfg: RegimeConfig) -> tuple[float, float]:
+    """(learned gap or nan, log-odds) of a displacement amplitude against what the distortion has shown.
+
+    Hitting needs an amplitude at least the gap, and the gap is at most the amplitudes at which the beam
+    was seen hitting: far below them a beam is free whatever else is uncertain. Where the amplitudes
+    called free and those called hitting do not overlap, the gap lies between them.
+    """
+    if z <= 0:
+        return float("nan"), -LEARNED_CAP
+    hi = float(_low_quantile(hit, 0.05)) if len(hit) >= 8 else float("nan")
+    lo = float(_low_quantile(free, 0.95)) if len(free) >= 8 else float("nan")
+    if np.isfinite(hi) and np.isfinite(lo) and lo < hi:
+        gap = float(np.sqrt(lo * hi))
+        spread = max(cfg.gap_scale, 0.5 * float(np.log(hi / lo)))
+        return gap, float(np.clip(np.log(z / gap) / spread, -LEARNED_CAP, LEARNED_CAP))
+    if np.isfinite(hi) and z < hi:  # below every amplitude seen hitting: far below, surely free
+        return float("nan"), float(np.clip(np.log(z / hi) / 0.15, -3.0, 0.0))
+    return float("nan"), 0.0

@@ -15,18 +15,33 @@ unfiltered 2 kHz samples:
    error runs and SQP refinement starts from the better of its choice and
    the previous model.
 
+A window that needs a new model gives two fits: the first as soon as its last sample is in
+(the sweep's choice, ``final`` False), the refined one with the next block or ``finish()``
+(``final`` True); the refined model is the next window's warm start. So the first model update
+of every window never waits for the optimiser, and the sequence of fits is the same for any
+split of the stream into blocks.
+
 The second equation reads v' = -w^2 z - 2 zeta w v + ... - a_base, so the
 coefficient of z is the identified stiffness per mass (1/s^2) and its
 square root over 2 pi the natural frequency. A change of active set from
 one window to the next is a model-change event.
+
+Uncertainty: every window's model comes with an ensemble (ident.ensemble: STLSQ on
+``ensemble_models`` block-bootstrap resamples of the window's rows at half the model's smallest
+active coefficient per equation, Fasel et al. 2022): per coefficient its standard deviation over
+the ensemble and the probability that the term is active, and the natural frequency's spread. With the window's
+displacement amplitude (sqrt(2) times the RMS of z) the natural frequency forms the beam's
+backbone (frequency against amplitude). The resamples are drawn from a generator seeded by
+the window's index, so the output does not depend on how the stream is cut into blocks.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..ensemble import block_bootstrap, model_thresholds
 from ..filters import lowpass_zero_phase
 from ..library import PolynomialForcingLibrary
 from ..model import SindyModel
@@ -52,6 +67,8 @@ class RollingConfig:
     # regime change puts the old model's error near 1.
     keep_factor: float = field(default=1.5, metadata={"gt": 1.0})
     keep_nrmse: float = field(default=0.3, metadata={"min": 0.0})
+    ensemble_models: int = field(default=32, metadata={"min": 2})
+    ensemble_blocks: int = field(default=8, metadata={"min": 2})
 
 
 @dataclass(frozen=True)
@@ -62,6 +79,11 @@ class BeamFit:
     natural_frequency_hz: float
     active: tuple[str, ...]  # "v' : z", ... the non-zero terms
     changed: bool  # active set differs from the previous window's
+    coefficient_std: np.ndarray  # (K, n) spread of each coefficient over the ensemble
+    inclusion: np.ndarray  # (K, n) probability that each term is active (share of the ensemble)
+    natural_frequency_std_hz: float  # spread of the natural frequency over the ensemble
+    amplitude_m: float  # sqrt(2) RMS of the relative displacement z over the window (the backbone's abscissa)
+    threshold: float  # the STLSQ threshold (unit-RMS columns) the model's active set came from
 
 
 @dataclass(frozen=True)
@@ -71,6 +93,7 @@ class WindowFit:
     t: np.ndarray  # times of the identification samples
     measured: np.ndarray  # (n, 2, 2): sample, beam, (z, v)
     predicted: np.ndarray  # (n, 2, 2): the model integrated over the window with the measured base
+    final: bool = True  # False: a refined fit of this window follows (the first fit is the sweep's choice)
 
 
 def _active(model: SindyModel) -> tuple[str, ...]:
@@ -99,6 +122,16 @@ def window_coordinates(x: np.ndarray, cfg: RollingConfig) -> tuple[np.ndarray, n
     return base[sl], z[sl], v[sl], r[sl]
 
 
+def window_sample_index(n_window: int, cfg: RollingConfig) -> np.ndarray:
+    """Indices into the window's samples of the rows window_coordinates keeps (trimmed ends, decimated)."""
+    step1 = max(1, int(cfg.fs_hz // INTEGRATION_FS_HZ))
+    fs1 = cfg.fs_hz / step1
+    n1 = len(range(0, n_window, step1))
+    step2 = max(1, int(round(fs1 / cfg.fs_ident_hz)))
+    e = edge_samples(fs1, cfg.f_lo_hz)
+    return np.arange(e, n1 - e, step2) * step1
+
+
 def ident_rate(cfg: RollingConfig) -> float:
     step1 = max(1, int(cfg.fs_hz // INTEGRATION_FS_HZ))
     fs1 = cfg.fs_hz / step1
@@ -123,14 +156,19 @@ class RollingIdentifier:
         self.n_seen = 0
         self._prev: list[SindyModel | None] = [None, None]
         self._prev_err = [np.inf, np.inf]
+        self._prev_lam = [0.0, 0.0]
+        self.windows = 0
         self.refits = 0  # windows that needed the full sweep (the rest kept the warm-start model)
+        self._pending = None  # a window whose new models await their SQP refinement
         self.lib = PolynomialForcingLibrary(2, cfg.degree, True, ("z", "v"))
 
     def step(self, block: np.ndarray) -> list[WindowFit]:
+        """The fits completed by this block: a window's first fit as soon as its last sample is in, and the
+        refined fit of a window that needed a new model when the next block (or ``finish``) comes."""
         x = np.asarray(block, float)
         if x.ndim != 2 or x.shape[1] != 3:
             raise ValueError(f"rolling identification needs blocks of shape (n, 3), got {x.shape}")
-        out = []
+        out = self.finish()
         i = 0
         while i < len(x):  # windows end on the hop grid, however the stream is cut into blocks
             piece = x[i:i + self.n_hop - self._since]
@@ -141,48 +179,94 @@ class RollingIdentifier:
             if self._since == self.n_hop:
                 self._since = 0
                 if len(self._buf) >= self.n_window:
+                    out += self.finish()
                     out.append(self.fit_window(self._buf, self.n_seen / self.cfg.fs_hz))
         return out
 
+    def finish(self) -> list[WindowFit]:
+        """The refined fit of the last window, if one is pending (call at the end of a stream)."""
+        if self._pending is None:
+            return []
+        pending, self._pending = self._pending, None
+        return [self._refined(pending)]
+
     def fit_window(self, x: np.ndarray, t_end: float) -> WindowFit:
+        """A window's first fit: the warm-start model where it still holds, else the sweep's model; where a
+        new model was needed its SQP refinement is left pending (``finish``), so that the first model
+        update of every window comes without waiting for the optimiser."""
         cfg = self.cfg
         base, z, v, r = window_coordinates(x, cfg)
         n = len(base)
-        t = t_end - (n - 1 - np.arange(n)) / ident_rate(cfg)
+        # sample k of the stream is at k / fs and t_end = (index of the window's last sample + 1) / fs
+        t = t_end - (len(x) - window_sample_index(len(x), cfg)) / cfg.fs_hz
         fits, pred = [], np.zeros((n, 2, 2))
+        index = self.windows
+        self.windows += 1
+        todo = {}
         for i in range(2):
             xs = np.column_stack([z[:, i], v[:, i]])
             dx = np.column_stack([v[:, i], r[:, i]])
             bound = 20 * np.abs(xs).max()
             prev = self._prev[i]
             keep_err = np.inf
-            kept = False
             if prev is not None:
                 keep_sim = simulate(self.lib, prev.coefficients, xs[0], t, base, bound=bound).x
                 keep_err = float(integration_errors(keep_sim[None], xs)[0])
+            lam = self._prev_lam[i]
             if prev is not None and (keep_err <= cfg.keep_factor * self._prev_err[i] or keep_err <= cfg.keep_nrmse):
                 coefs, err = prev.coefficients, keep_err  # the warm-start model still holds
                 pred[:, i, :] = keep_sim
-                kept = True
             else:
                 self.refits += 1
                 sw = sweep(self.lib, xs, dx, t, base)
                 cands = [sw.coefficients[sw.chosen]] + ([prev.coefficients] if prev is not None else [])
                 errs = integration_errors(simulate(self.lib, np.stack(cands), xs[0], t, base, bound=bound).x, xs)
-                start = cands[int(np.argmin(errs))]
-                coefs, err = start, float(np.min(errs))
-                if cfg.refine and np.count_nonzero(start):
-                    ref = refine(self.lib, start, xs, t, base, maxiter=15, gradient="forward")
-                    coefs, err = ref.coefficients, ref.error_after
+                best = int(np.argmin(errs))
+                if best == 0:
+                    lam = float(sw.thresholds[sw.chosen])
+                coefs, err = cands[best], float(np.min(errs))
                 self._prev_err[i] = err
-            model = SindyModel(self.lib, coefs)
-            k = -model.coefficients[self.lib.names.index("z"), 1]
-            fn = float(np.sqrt(k) / (2 * np.pi)) if k > 0 else float("nan")
-            act = _active(model)
-            changed = prev is not None and act != _active(prev)
-            fits.append(BeamFit(model, err, float(k), fn, act, changed))
-            self._prev[i] = model
-            if not kept:
                 pred[:, i, :] = simulate(self.lib, coefs, xs[0], t, base, bound=bound).x
+                if cfg.refine and np.count_nonzero(coefs):
+                    todo[i] = (xs, dx, bound, prev)
+            fits.append(self._beam_fit(i, coefs, err, lam, xs, dx, base, z[:, i], prev, index, 0))
         meas = np.stack([np.column_stack([z[:, i], v[:, i]]) for i in range(2)], axis=1)
-        return WindowFit(t_end, (fits[0], fits[1]), t, meas, pred)
+        fit = WindowFit(t_end, (fits[0], fits[1]), t, meas, pred, final=not todo)
+        if todo:
+            self._pending = (fit, todo, base, z, index)
+        return fit
+
+    def _refined(self, pending) -> WindowFit:
+        """SQP refinement (Stender et al. 2019) of the window's new models, from the sweep's choice."""
+        fit, todo, base, z, index = pending
+        fits, pred = list(fit.beams), fit.predicted.copy()
+        for i, (xs, dx, bound, prev) in todo.items():
+            quick = fits[i]
+            ref = refine(self.lib, quick.model.coefficients, xs, fit.t, base, maxiter=15, gradient="forward")
+            self._prev_err[i] = ref.error_after
+            b = self._beam_fit(i, ref.coefficients, ref.error_after, quick.threshold, xs, dx, base, z[:, i], prev,
+                               index, 1)
+            fits[i] = replace(b, changed=False)  # a change of active set was reported with the first fit
+            pred[:, i, :] = simulate(self.lib, ref.coefficients, xs[0], fit.t, base, bound=bound).x
+        return replace(fit, beams=(fits[0], fits[1]), predicted=pred, final=True)
+
+    def _beam_fit(self, i, coefs, err, lam, xs, dx, base, z, prev, index, stage) -> BeamFit:
+        """The beam's fit with its ensemble; the model becomes the next window's warm start."""
+        cfg = self.cfg
+        model = SindyModel(self.lib, coefs)
+        iz = self.lib.names.index("z")
+        k = -model.coefficients[iz, 1]
+        fn = float(np.sqrt(k) / (2 * np.pi)) if k > 0 else float("nan")
+        act = _active(model)
+        changed = prev is not None and act != _active(prev)
+        theta = self.lib.transform(xs, base)
+        rng = np.random.default_rng((index, stage))  # the window's index: the same resamples for any block split
+        ens = block_bootstrap(theta, dx, model_thresholds(theta, coefs, lam), n_models=cfg.ensemble_models,
+                              n_blocks=cfg.ensemble_blocks, rng=rng)
+        k_m = -ens.coefficients[:, iz, 1]
+        fn_m = np.sqrt(k_m[k_m > 0]) / (2 * np.pi)
+        fn_std = float(fn_m.std()) if fn_m.size > 1 else float("nan")
+        amp = float(np.sqrt(2.0) * np.sqrt(np.mean(z**2)))
+        self._prev[i] = model
+        self._prev_lam[i] = lam
+        return BeamFit(model, err, float(k), fn, act, changed, ens.std, ens.inclusion, fn_std, amp, lam)

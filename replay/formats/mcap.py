@@ -15,7 +15,9 @@ Readers (``read_samples``, ``read_recording``, ``read_columns``) refuse a file w
 without its footer with one line that says where and what to do ("chunk at byte N unreadable ...:
 run replay recover"); ``replay recover`` (replay.recover) uses :func:`scan` to keep everything that
 is intact. Samples come from the raw serial bytes of ``/rig/raw``, decoded in bulk with
-daq.protocol (fast), else from the ``/rig/accel`` messages.
+daq.protocol (fast; the only record of the samples in recordings since the compact layout, read with
+the ``calibration`` and ``samples`` metadata), else from the ``/rig/accel`` messages (imports,
+text-line devices, ``--accel-json``, older recordings).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ import zstandard
 
 from daq.config import Config, DaqConfig
 from daq.driver import SampleBlock
-from daq.protocol import Decoder
+from daq.protocol import FLAG_CLIPPED, Decoder
 from daq.recorder import RAW_LINES, TOPICS, McapRecorder
 from daq.sim.rig import RigConfig
 
@@ -555,6 +557,7 @@ class Recording:
     devices: list[dict] = field(default_factory=list)  # status frames of the device
     config_yaml: str = ""
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    samples_topic: str = TOPICS["accel"]  # where the samples came from: /rig/accel, or /rig/raw decoded
 
     @property
     def rate_hz(self) -> float:
@@ -579,7 +582,13 @@ def _json(data: bytes, path: Path) -> dict:
 
 
 def read_recording(path: str | Path, raw: bool = True) -> Recording:
-    """Every message of an intact recording (refused with one line if damaged or cut short)."""
+    """Every message of an intact recording (refused with one line if damaged or cut short).
+
+    The samples are the ``/rig/accel`` messages where the recording has them (``--accel-json``, imports,
+    text-line devices, recordings before the compact layout), else the serial bytes of ``/rig/raw``
+    decoded (:func:`decode_raw`), with the same sequence numbers, device times, values, flags and log
+    times as ``/rig/accel`` would have had. ``raw`` keeps the serial bytes in ``Recording.raw``.
+    """
     s = open_intact(path)
     path = Path(path)
     topic = {cid: c.topic for cid, c in s.channels.items()}
@@ -599,41 +608,86 @@ def read_recording(path: str | Path, raw: bool = True) -> Recording:
             lt.append(log)
             pt.append(pub)
         elif tp == TOPICS["raw"]:
-            if raw:
-                raws.append(data)
+            raws.append((data, pub))
         else:
             for key in lists:
                 if tp == TOPICS[key]:
                     lists[key].append(_json(data, path))
     meta = {name: dict(m) for name, m in s.metadata}
-    return Recording(path, np.array(seq, np.int64), np.array(t, float), np.array(vals, float).reshape(-1, 3),
-                     np.array(clip, bool), np.array(lt, np.int64), np.array(pt, np.int64), b"".join(raws),
+    columns = (np.array(seq, np.int64), np.array(t, float), np.array(vals, float).reshape(-1, 3),
+               np.array(clip, bool), np.array(lt, np.int64), np.array(pt, np.int64))
+    source = TOPICS["accel"]
+    if not seq:
+        dec = decode_raw(s, raws, lists["events"])
+        if dec is not None:
+            columns = (dec.seq, dec.t_device, dec.values, dec.clipped, dec.log_time_ns, dec.publish_time_ns)
+            source = TOPICS["raw"]
+    return Recording(path, *columns, b"".join(r[0] for r in raws) if raw else b"",
                      lists["events"], lists["status"], lists["model"], lists["device"],
-                     meta.get("config", {}).get("yaml", ""), meta)
+                     meta.get("config", {}).get("yaml", ""), meta, source)
 
 
 def _restart_starts(events: list[dict]) -> list[float]:
     return [float(e["timeline_s"]) for e in events if e.get("kind") == "device_restart" and "timeline_s" in e]
 
 
-def _from_raw(s: Scan, raw: bytes, events: list[dict]):
-    """(grid index, seq, values, rate) decoded from /rig/raw, or None when the file has no raw bytes or calibration."""
+@dataclass(frozen=True)
+class RawSamples:
+    """The samples of a recording decoded from its serial bytes (``/rig/raw``)."""
+
+    seq: np.ndarray  # (n,) int64, the device's 32-bit sequence numbers as sent
+    t_device: np.ndarray  # (n,) device clock [s] since its boot
+    values: np.ndarray  # (n, 3) base, tip1, tip2 [m/s^2], from the calibration metadata
+    clipped: np.ndarray  # (n,) bool
+    session: np.ndarray  # (n,) bool: a new device session (restart) starts at this frame
+    log_time_ns: np.ndarray  # (n,) the timeline, as the recorder stamps /rig/accel
+    publish_time_ns: np.ndarray  # (n,) the host time of the read that completed the frame
+    fs_hz: float  # from the device clock within sessions (NaN with fewer than two samples)
+
+
+def raw_is_frames(s: Scan) -> bool:
+    """Whether the recording's /rig/raw holds binary frames (not a text-line device's lines)."""
+    return not any(c.topic == TOPICS["raw"] and c.metadata.get("format") == RAW_LINES for c in s.channels.values())
+
+
+def decode_raw(s: Scan, raws: list[tuple[bytes, int]], events: list[dict]) -> RawSamples | None:
+    """The samples of ``/rig/raw`` (messages as (bytes, publish time ns), in file order), or None when the file
+    has no raw bytes, no calibration, or text lines (their samples are the /rig/accel messages).
+
+    The recorded range: the first ``count`` frames of the ``samples`` metadata (the recorder kept the first
+    ``count`` frames decoded from these bytes); in a recovered file, up to the last occurrence of its
+    ``last_seq`` (raw bytes may be missing). Sessions: a new one where the sequence or device time goes
+    back, or a status frame names a new session (as the driver cuts); each starts on the timeline where
+    its ``device_restart`` event says. Log times: the ``anchor_ns`` of the ``samples`` metadata, plus the
+    timeline. Without it: in a file cut before it was closed (no ``samples`` metadata), as the recorder
+    anchors (the read that delivered the first frame arrived with the last frame it delivered); in a
+    closed file from before ``anchor_ns`` was written (it has /rig/accel too), as its recorder anchored
+    (the first frame at the host time of its read).
+    """
     cal = s.meta("calibration")
-    if not raw or not cal:
+    if not raws or not cal or not raw_is_frames(s):
         return None
-    if any(c.topic == TOPICS["raw"] and c.metadata.get("format") == RAW_LINES for c in s.channels.values()):
-        return None  # a text-line device: its lines have no checksum; the samples are the /rig/accel messages
     try:
         scale = np.array([float(cal[f"{c}.scale_m_per_s2_per_count"]) for c in CHANNELS])
         offset = np.array([float(cal[f"{c}.offset_m_per_s2"]) for c in CHANNELS])
     except (KeyError, ValueError):
         return None
     dec = Decoder()
-    parts = [dec.feed(raw), dec.flush()]
+    parts = [dec.feed(b"".join(r[0] for r in raws)), dec.flush()]
     seq = np.concatenate([p.seq for p in parts]).astype(np.int64)
-    t_us = np.concatenate([p.t_us for p in parts]).astype(np.float64)
+    t_us = np.concatenate([p.t_us for p in parts])
     counts = np.concatenate([p.counts for p in parts])
-    restart = np.concatenate([p.restart for p in parts])
+    flags = np.concatenate([p.flags for p in parts])
+    cuts = np.concatenate([p.restart for p in parts])
+    end = np.concatenate([p.end for p in parts])
+    session = None
+    at = 0
+    for p in parts:  # a new session id without a sequence reset is still a new clock
+        for st in p.status:
+            if session is not None and st.session_id != session and at + st.index < cuts.size and at + st.index > 0:
+                cuts[at + st.index] = True
+            session = st.session_id
+        at += len(p)
     span = s.meta("samples")
     k = None
     if s.meta("recovery"):  # raw bytes may be missing: the recording ended at its last sequence number
@@ -641,18 +695,43 @@ def _from_raw(s: Scan, raw: bytes, events: list[dict]):
         hits = np.flatnonzero(seq == int(last)) if last.isdigit() else np.zeros(0, int)
         k = int(hits[-1]) + 1 if hits.size else None
     elif span.get("count", "").isdigit():
-        k = int(span["count"])  # the recorder kept the first `count` frames decoded from these bytes
+        k = int(span["count"])
     if k is not None:
-        seq, t_us, counts, restart = seq[:k], t_us[:k], counts[:k], restart[:k]
-    if seq.size < 2:
-        return None
-    step = np.diff(seq)
-    dt = np.diff(t_us)[(step == 1) & ~restart[1:]]
-    if not dt.size or not np.median(dt) > 0:
-        return None
-    fs = 1e6 / float(np.median(dt))
-    index = _session_index(seq, restart, _restart_starts(events), fs)
-    return index, seq, counts.astype(np.float64) * scale + offset, fs
+        seq, t_us, counts, flags, cuts, end = seq[:k], t_us[:k], counts[:k], flags[:k], cuts[:k], end[:k]
+    n = seq.size
+    dt = np.diff(t_us.astype(np.float64))[(np.diff(seq) == 1) & ~cuts[1:]] if n > 1 else np.zeros(0)
+    fs = 1e6 / float(np.median(dt)) if dt.size and np.median(dt) > 0 else float("nan")
+    # the timeline, as the driver computes it: device time plus an offset per session
+    t_dev = t_us.astype(np.float64) * 1e-6
+    t_s = np.empty(n)
+    starts = _restart_starts(events)
+    a, j = 0, 0
+    for b in list(np.flatnonzero(cuts[1:]) + 1) + [n]:
+        if b <= a:
+            continue
+        if a == 0:
+            shift = -float(t_dev[0])
+        else:
+            after = float(t_s[a - 1]) + (1.0 / fs if np.isfinite(fs) else 0.0)
+            shift = (starts[j] if j < len(starts) else after) - float(t_dev[a])
+            j += 1
+        t_s[a:b] = t_dev[a:b] + shift
+        a = b
+    cum = np.cumsum([len(r[0]) for r in raws])
+    pub = np.array([r[1] for r in raws], np.int64)[np.minimum(np.searchsorted(cum, end), len(raws) - 1)]
+    anchor = span.get("anchor_ns", "")
+    if anchor.lstrip("-").isdigit():
+        anchor_ns = int(anchor)
+    elif n and span:  # closed by a recorder that anchored at the first frame
+        anchor_ns = int(pub[0]) - int(round(float(t_s[0]) * 1e9))
+    elif n:
+        first_read = np.flatnonzero((pub == pub[0]) & ~np.cumsum(cuts).astype(bool))
+        anchor_ns = int(pub[0]) - int(round(float(t_s[first_read[-1]]) * 1e9))
+    else:
+        anchor_ns = 0
+    log = anchor_ns + np.rint(t_s * 1e9).astype(np.int64)
+    return RawSamples(seq, t_dev, counts.astype(np.float64) * scale + offset, (flags & FLAG_CLIPPED) != 0, cuts, log,
+                      pub, fs)
 
 
 def _session_index(seq: np.ndarray, restart: np.ndarray, starts: list[float], fs: float) -> np.ndarray:
@@ -691,13 +770,14 @@ def read_samples(path: str | Path, *, fill: bool = True, **unused) -> Samples:
     events, raw = [], []
     for m in s.messages(ev_ids | raw_ids):
         if m[0] in raw_ids:
-            raw.append(m[4])
+            raw.append((m[4], m[3]))
         else:
             events.append(_json(m[4], path))
     meta = {name: dict(m) for name, m in s.metadata}
-    fast = _from_raw(s, b"".join(raw), events)
-    if fast is not None:
-        index, seq, values, fs = fast
+    fast = decode_raw(s, raw, events)
+    if fast is not None and fast.seq.size >= 2 and np.isfinite(fast.fs_hz):
+        index = _session_index(fast.seq, fast.session, _restart_starts(events), fast.fs_hz)
+        seq, values, fs = fast.seq, fast.values, fast.fs_hz
     else:
         rec = read_recording(path, raw=False)
         if len(rec.seq) < 2:
@@ -734,7 +814,8 @@ def write_samples(path: str | Path, samples: Samples, *, force: bool = False, in
     """Samples as a recording of this tool (``/rig/accel`` and metadata; no raw bytes), written as
     ``path.part`` and renamed when complete."""
     cfg = Config(RigConfig(), DaqConfig(rate_hz=samples.fs_hz), source=source or f"imported from {samples.source}")
-    rec = McapRecorder(path, cfg, port=f"import:{samples.source}", flush_s=3600.0, force=force, inputs=inputs)
+    rec = McapRecorder(path, cfg, port=f"import:{samples.source}", flush_s=3600.0, force=force, inputs=inputs,
+                       accel_json=True)  # no serial bytes: the JSON samples are the record
     try:
         n = len(samples.t)
         now = time.time_ns()
