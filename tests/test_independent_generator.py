@@ -294,16 +294,15 @@ def _check_case(case: Case):
     return truth
 
 
-def test_discovery_rig_case_truth_and_run_time():
-    """A 43 s base-excited rig case at 1 kHz with a stopper: truth, equivalents and the time it takes."""
-    discovery_case(2, "cc_beam", "none")  # compiled kernels, loaded once
+def test_discovery_rig_case_truth():
+    """A 43 s base-excited rig case at 1 kHz with a stopper: truth and equivalents (its generation time is
+    printed, not asserted: speed belongs in benchmarks)."""
     t0 = time.perf_counter()
     case = discovery_case(22)
     seconds = time.perf_counter() - t0
     truth = _check_case(case)
     assert (case.family, truth["cause"], case.fs_hz, truth["duration_s"]) == ("rig_base", "contact", 1000.0, 43.0)
     print(f"43 s rig case at 1 kHz with a stopper: {seconds:.2f} s")
-    assert seconds < 5.0
     eq, effect = truth["equivalent"], truth["effect"]
     assert truth["location"] == eq["sensor"] == f"tip{truth['position']['beam']}"
     r = eq["mode_ratio"]

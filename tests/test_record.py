@@ -157,7 +157,12 @@ def test_sigterm_finishes_the_file(tmp_path):
     out = tmp_path / "term.mcap"
     proc = subprocess.Popen([sys.executable, "-m", "daq", "record", "--sim", "-o", str(out), "--quiet"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    time.sleep(5)
+    part = tmp_path / "term.mcap.part"
+    deadline = time.monotonic() + 120  # kernels compile before the port opens: slow on a cold cache
+    while not part.exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.1)
+    assert part.exists(), proc.stderr.read() if proc.poll() is not None else "no .part within 120 s"
+    time.sleep(3)  # about 6,000 samples recorded
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(timeout=20) == 0
     rec = read_recording(out)  # readable without recovery: summary and footer written
