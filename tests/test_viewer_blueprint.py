@@ -80,3 +80,20 @@ def test_h1_and_coherence_against_their_analytic_values():
 def test_nice_ticks():
     assert np.allclose(nice_ticks(0.0, 1.1), [0, 0.5, 1.0])
     assert np.allclose(nice_ticks(9.8, 11.6), [10, 10.5, 11, 11.5])
+
+
+def test_replay_saves_the_view_beside_its_output_not_beside_the_input(tmp_path):
+    rec = ROOT / "recordings" / "linear.mcap"
+    env = dict(os.environ, PYTHONPATH=str(ROOT), RERUN_ANALYTICS="0")
+    before = set((ROOT / "recordings").iterdir())
+    run = [sys.executable, "-m", "replay", str(rec), "--max", "--no-identify", "--duration", "2", "--viewer", "save"]
+    p = subprocess.run(run, capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
+    assert p.returncode == 0, p.stderr
+    assert (tmp_path / "linear.rrd").is_file() and f"saving to {tmp_path / 'linear.rrd'}" in p.stderr
+    events = tmp_path / "out" / "ev.jsonl"
+    events.parent.mkdir()
+    p = subprocess.run(run + ["--events", str(events)], capture_output=True, text=True, timeout=120, cwd=tmp_path,
+                       env=env)
+    assert p.returncode == 0, p.stderr
+    assert events.with_suffix(".rrd").is_file()
+    assert set((ROOT / "recordings").iterdir()) == before
