@@ -71,9 +71,10 @@ LABELS = {"base": "base", "tip1": "tip 1", "tip2": "tip 2"}
 BACKBONE_POINTS = 600  # the last windows shown on the backbone (10 minutes at a 1 s hop)
 SPECTRUM_SPAN_S, SPECTRUM_EVERY_S, SPECTRUM_SEGMENT_S = 8.0, 1.0, 1.0  # 15 averages of 1 Hz resolution
 SPECTRUM_MAX_HZ = 60.0  # a little above the analysis band (50 Hz), to show its edge
-COHERENCE_MIN = 0.8  # transmissibility drawn where the coherence says the tip follows the base
+COHERENCE_MIN = 0.5  # transmissibility drawn where the coherence says the tip follows the base (15 averages:
+# the coherence of unrelated signals is about 1/15)
 TERM_MIN_P = 0.5  # a term is drawn when active or active in at least this share of the ensemble
-TERM_SCALE = 4.0  # length of a bar explaining all of v' (rows are 1 apart)
+TERM_ROWS = 6  # inactive terms likely in the ensemble are added up to this many rows
 
 # the blueprint's panels: (kind, title, entities); the test checks that every entity holds data
 PANELS = (
@@ -90,7 +91,7 @@ PANELS = (
                                                                               "model/beam2/terms/spread")),
     ("spatial", "backbone: natural frequency vs amplitude, one point per window",
      ("backbone/beam1", "backbone/beam2", "backbone/beam1/spread", "backbone/beam2/spread")),
-    ("spatial", "transmissibility |H1| base → tip, where coherence ≥ 0.8",
+    ("spatial", "transmissibility |H1| base → tip, where coherence ≥ 0.5",
      ("spectra/transmissibility/tip1", "spectra/transmissibility/tip2")),
     ("spatial", "coherence base → tip", ("spectra/coherence/tip1", "spectra/coherence/tip2")),
     ("spatial", "PSD of the last 8 s: base grey, tip 1 orange, tip 2 blue", tuple(f"spectra/psd/{c}" for c in CHANNELS)),
@@ -191,7 +192,7 @@ class Frame:
         px = up(self(xt, np.full(len(xt), self.ylim[0])))
         py = up(self(np.full(len(yt), self.xlim[0]), yt))
         marks = [[(x, 0), (x, -0.25)] for x, _ in px] + [[(0, y), (-0.25, y)] for _, y in py]
-        pos = ([(x, -0.9) for x, _ in px] + [(-0.4 - 0.12 * len(t), y) for (_, y), t in zip(py, ylab)]
+        pos = ([(x, -0.9) for x, _ in px] + [(-(0.025 + 0.008 * len(t)) * self.w, y) for (_, y), t in zip(py, ylab)]
                + [(self.w / 2, -2.0), (-0.5, FRAME_H + 0.8)])
         labels = [f"{v:g}" for v in xt] + list(ylab) + [xlabel, ylabel]
         return [rr.LineStrips2D([up(s) for s in box + marks], colors=(150, 150, 150),
@@ -480,7 +481,9 @@ class RerunViewer:
         """Horizontal bars, one per term shown (named on the axis, with its value), +-1 std as black lines."""
         m = b.model
         p = np.asarray(b.inclusion)[:, 1] if b.inclusion is not None else np.zeros(len(contrib))
-        show = [k for k in range(len(contrib)) if m.coefficients[k, 1] != 0 or p[k] >= TERM_MIN_P]
+        active = [k for k in range(len(contrib)) if m.coefficients[k, 1] != 0]
+        likely = sorted((k for k in range(len(contrib)) if k not in active and p[k] >= TERM_MIN_P), key=lambda k: -p[k])
+        show = sorted(active + likely[:max(0, TERM_ROWS - len(active))])
         if not show:
             return
         c, sd = contrib[show], spread[show]

@@ -14,6 +14,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from daq.viewer import PANELS, nice_ticks, transfer_estimates
+from ident.cli.fit import cycles_window
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -97,3 +98,10 @@ def test_replay_saves_the_view_beside_its_output_not_beside_the_input(tmp_path):
     assert p.returncode == 0, p.stderr
     assert events.with_suffix(".rrd").is_file()
     assert set((ROOT / "recordings").iterdir()) == before
+
+
+def test_fit_figure_shows_four_cycles_of_the_strongest_frequency():
+    t = np.arange(0, 20, 1 / 200)
+    x = np.sin(2 * np.pi * 12.5 * t) + 0.3 * np.sin(2 * np.pi * 37.5 * t)
+    assert cycles_window(x, 200.0) == pytest.approx(4 / 12.5, rel=0.01)
+    assert cycles_window(x[:40], 200.0) == pytest.approx(0.2)  # shorter than 4 cycles: all of it
