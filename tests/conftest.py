@@ -37,3 +37,16 @@ def lorenz():
     x = sol.y.T
     dx = np.array([rhs(0, u) for u in x])
     return t, x, dx
+
+
+@pytest.fixture(scope="session")
+def dask_scheduler():
+    """The address of a local Dask cluster of 2 worker processes (ident.cli.engine's, on 127.0.0.1), started once
+    for the tests that run cases as Dask tasks and pass it as ``--scheduler``."""
+    from ident.cli.engine import local_cluster
+
+    cluster = local_cluster(2)
+    try:
+        yield cluster.scheduler_address
+    finally:
+        cluster.close()

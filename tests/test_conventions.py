@@ -25,7 +25,8 @@ VERSION = version("shaker-ident")
 
 @pytest.mark.parametrize("main,argv", [
     (ident_main, []), (ident_main, ["duffing"]), (ident_main, ["fit"]), (ident_main, ["discover"]),
-    (ident_main, ["bench"]), (daq_main, []), (daq_main, ["record"]), (daq_main, ["sim"]), (daq_main, ["bench"]),
+    (ident_main, ["bench"]), (ident_main, ["batch"]), (daq_main, []), (daq_main, ["record"]), (daq_main, ["sim"]),
+    (daq_main, ["bench"]),
     (daq_main, ["calibrate"]),
     (replay_main, []), (replay_main, ["play"]), (replay_main, ["info"]), (replay_main, ["export"]),
     (replay_main, ["import"]), (replay_main, ["recover"]),

@@ -1,4 +1,8 @@
-"""``ident bench sweep``: this project's sparsification sweep against a plain pysindy loop.
+"""``ident bench sweep|discovery|batch``: the benchmarks (printed figures, not tests).
+
+``discovery`` is ``ident.cli.bench_discovery`` (hidden-effect cases, on Dask with ``--workers`` or
+``--scheduler``), ``batch`` is ``ident.cli.bench_batch`` (``ident batch`` on 1 and 2 local workers). Here:
+``sweep``, this project's sparsification sweep against a plain pysindy loop.
 
 Both run the same job on the paper's Table 2 data (Duffing, noise eta = 0.08
 on X and Xdot, states denoised as ``ident duffing`` does; on clean data every
@@ -15,6 +19,7 @@ noisy machine. Run it alone: the compiled kernel uses both cores.
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -22,7 +27,10 @@ from ..derivatives import smooth
 from ..library import PolynomialForcingLibrary
 from ..paper.duffing import denoise_window, duffing_data
 from ..sindy import sweep
-from .bench_discovery import run_discovery
+from . import DURATION, SEED, number
+from .bench_batch import run_bench as run_batch_bench
+from .bench_discovery import RIG_CASE_S, run_discovery
+from .engine import add_options
 
 
 TOLERANCE = 0.5  # the same selection rule as ident.sindy.sweep's default
@@ -30,14 +38,22 @@ TOLERANCE = 0.5  # the same selection rule as ident.sindy.sweep's default
 
 def add_parser(sub) -> None:
     p = sub.add_parser("bench", help="benchmarks (printed ratios, not tests)")
-    p.add_argument("what", choices=["sweep", "discovery"],
-                   help="sweep: ours vs a pysindy fit+simulate loop; discovery: hidden-effect cases")
-    p.add_argument("--cases", type=int, default=100, help="discovery: number of seeded cases (default 100)")
+    p.add_argument("what", choices=["sweep", "discovery", "batch"],
+                   help="sweep: ours vs a pysindy fit+simulate loop; discovery: hidden-effect cases; batch: "
+                        "ident batch in this process and on 1 and 2 local Dask workers")
+    p.add_argument("--cases", type=number(1, 100_000, integer=True), default=100,
+                   help="discovery: number of seeded cases (default 100)")
     p.add_argument("--generator", choices=("independent", "rig"), default="independent",
                    help="discovery: daq.sim.independent (written apart from ident; default) or daq.sim.hidden "
                         "(this project's rig model with one effect)")
-    p.add_argument("--seed", type=int, default=0, help="discovery: first seed")
-    p.add_argument("--workers", type=int, default=1, help="discovery: processes (the machine's cores at most)")
+    p.add_argument("--seed", type=SEED, default=0, help="discovery: first seed; batch: the campaign's seed")
+    p.add_argument("--duration", type=DURATION, help=f"discovery: the rig generator's case length (default "
+                                                       f"{RIG_CASE_S:g} s); batch: each recording's (default 8 s)")
+    p.add_argument("--campaign", type=Path, help="batch: the campaign's folder (made there if missing or empty, "
+                                                 "reused after; default: a temporary folder)")
+    p.add_argument("--recordings", type=number(2, 100_000, integer=True), default=100,
+                   help="batch: recordings in the campaign (default 100, and one cut copy)")
+    add_options(p, "discovery: local Dask worker processes (default: in this process, one case after another)")
     p.add_argument("--max-baseline", type=int, default=0,
                    help="run pysindy on at most this many thresholds and extrapolate (0 = all)")
     p.set_defaults(func=run)
@@ -75,9 +91,17 @@ def _pysindy_loop(x, xdot, t, f, lambdas, n_rows):
 
 def run(args) -> int:
     if args.what == "discovery":
-        if args.cases < 1 or args.workers < 1:
-            raise ValueError("--cases and --workers must be at least 1")
-        return run_discovery(args.generator, args.cases, args.seed, args.workers)
+        if args.duration is not None and args.generator != "rig":
+            raise ValueError("--duration sets the rig generator's case length; the independent generator's cases "
+                             "have their own")
+        return run_discovery(args.generator, args.cases, args.seed, args.workers, args.scheduler,
+                             args.duration or RIG_CASE_S)
+    if args.what == "batch":
+        if args.scheduler or args.workers is not None:
+            raise ValueError("ident bench batch compares 1 and 2 local workers itself; --scheduler and --workers "
+                             "are for ident bench discovery")
+        args.duration = args.duration or 8.0
+        return run_batch_bench(args)
     return run_sweep(args)
 
 

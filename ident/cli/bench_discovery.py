@@ -6,6 +6,10 @@ chain of masses, a clamped-clamped beam; its own equations and integrator, impor
 easy test). Prints the confusion table (true against named, with "ambiguous" and "nothing" as
 columns), false extra findings, parameter errors and gains, and the run time per case.
 
+Cases run in this process one after the other, or as Dask tasks (``--workers N`` local processes,
+``--scheduler ADDRESS`` a cluster; ``ident.cli.engine``), printed in seed order either way: the same lines
+and the same table as the serial run (only the run times differ).
+
 A case is named right when the first finding (not ambiguous) has the true cause at the true location:
 the sensor at the effect, or for an element between two sensors that pair (in either order, as a
 difference or a sum). A finding beyond the true one, or any finding in a "none" case, is a false extra
@@ -16,7 +20,6 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,6 +28,7 @@ from daq.sim.independent.cases import discovery_case
 
 from ..discovery import Channel, Measurement, discover
 from ..rig import RigParams
+from .engine import ordered, session
 
 SYNONYMS = {"friction_joint": "hysteretic_joint", "geometric_hardening": "cubic_stiffness"}
 # the truth's parameter and the finding's (both per unit modal mass at the location, or a gap)
@@ -65,8 +69,11 @@ class Verdict:
     detail: list = field(default_factory=list)
 
 
-def rig_case(seed: int) -> Case:
-    c = hidden_case(seed, fs_hz=1000.0)
+RIG_CASE_S = 40.0  # the rig generator's case length
+
+
+def rig_case(seed: int, duration_s: float = RIG_CASE_S) -> Case:
+    c = hidden_case(seed, fs_hz=1000.0, duration_s=duration_s)
     m = Measurement(c.fs_hz, Channel("base", "base_acceleration", c.values[:, 0]),
                     (Channel("tip1", "acceleration", c.values[:, 1]), Channel("tip2", "acceleration", c.values[:, 2])))
     return Case(seed, f"rig ({c.excitation})", m, c.nominal, c.effect, f"tip{c.beam}", dict(c.truth))
@@ -101,9 +108,10 @@ def judge(case: Case, d, seconds: float) -> Verdict:
                    [f"{f.label} gain {f.gain:.2f}" for f in findings])
 
 
-def run_case(args: tuple[str, int]) -> Verdict:
-    generator, seed = args
-    case = rig_case(seed) if generator == "rig" else independent_case(seed)
+def run_case(args: tuple[str, int, float]) -> Verdict:
+    """One case (a Dask task): (generator, seed, the rig generator's case length in s)."""
+    generator, seed, duration_s = args
+    case = rig_case(seed, duration_s) if generator == "rig" else independent_case(seed)
     t0 = time.perf_counter()
     try:
         d = discover(case.measurement, rig=case.rig)
@@ -166,19 +174,15 @@ def report(verdicts: list[Verdict], wall_s: float) -> str:
     return "\n".join(lines)
 
 
-def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: int = 1) -> int:
+def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: int | None = None,
+                  scheduler: str | None = None, duration_s: float = RIG_CASE_S) -> int:
+    """The benchmark: in this process, or on a local Dask cluster of ``workers`` processes, or on the
+    cluster at ``scheduler``; the lines in seed order either way."""
     t0 = time.perf_counter()
-    jobs = [(generator, s) for s in range(first_seed, first_seed + n_cases)]
+    jobs = [(generator, s, duration_s) for s in range(first_seed, first_seed + n_cases)]
     verdicts = []
-    if workers > 1:
-        with ProcessPoolExecutor(workers) as pool:
-            it = pool.map(run_case, jobs)
-            for v in it:
-                verdicts.append(v)
-                _print(v)
-    else:
-        for job in jobs:
-            v = run_case(job)
+    with session(scheduler, workers) as client:
+        for v in ordered(client, run_case, jobs, "discovery"):
             verdicts.append(v)
             _print(v)
     print()

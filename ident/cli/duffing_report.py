@@ -1,7 +1,9 @@
 """``ident duffing``: run the paper's Duffing validation and write the JSON and the report folder.
 
 The report is a markdown summary, CSV tables and PNG figures analogous to the
-paper's Figures 2-5.
+paper's Figures 2-5. The noise sweep's fits (Figure 4: 200, or 24 with ``--quick``) run in this process,
+or as Dask tasks with ``--workers N`` (local processes) or ``--scheduler ADDRESS`` (a cluster), with the
+same results (``ident.cli.engine``).
 """
 
 from __future__ import annotations
@@ -12,11 +14,13 @@ import math
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from daq.safeio import Output, check_outputs, safe_folder, safe_output
 
 from ..paper.duffing import DEFAULT_ETAS, QUICK_ETAS, run_study
 from . import SEED
+from .engine import add_options, mapper, session
 
 TERMS_D = ["1", "x1", "x2", "x1^2", "x1 x2", "x2^2", "x1^3", "x1^2 x2", "x1 x2^2", "x2^3", "F"]
 
@@ -29,16 +33,16 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=SEED, default=0, help="seed of the noise draws (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--force", action="store_true", help="replace an existing --json, write into a non-empty --report")
+    add_options(p, "run the noise sweep's fits on a local Dask cluster of N processes (default: in this process)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from tqdm import tqdm
-
     check_outputs([Output("--json", args.json), Output("--report", args.report, folder=True)], (), args.force)
     n = 2 * (len(QUICK_ETAS) * 3 if args.quick else len(DEFAULT_ETAS) * 10)
-    with tqdm(total=n, desc="noise sweep", disable=args.no_progress, unit="fit") as bar:
-        study = run_study(quick=args.quick, seed=args.seed, progress=bar.update)
+    with session(args.scheduler, args.workers) as client, \
+            tqdm(total=n, desc="noise sweep", disable=args.no_progress, unit="fit") as bar:
+        study = run_study(quick=args.quick, seed=args.seed, progress=bar.update, mapper=mapper(client, "duffing"))
     js = study["json"]
     print(summary_text(js))
     if args.json:

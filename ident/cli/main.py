@@ -1,11 +1,11 @@
-"""The ``ident`` command: the paper's Duffing study, ``fit``, ``discover`` and the benchmarks."""
+"""The ``ident`` command: the paper's Duffing study, ``fit``, ``discover``, ``batch`` and the benchmarks."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-from . import OneLineParser, bench, discover, duffing_report, fit, run_guarded
+from . import OneLineParser, batch, bench, discover, duffing_report, fit, run_guarded
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -15,6 +15,7 @@ def build_parser() -> argparse.ArgumentParser:
     duffing_report.add_parser(sub)
     fit.add_parser(sub)
     discover.add_parser(sub)
+    batch.add_parser(sub)
     bench.add_parser(sub)
     return parser
 

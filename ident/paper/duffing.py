@@ -22,7 +22,7 @@ Everything here is pure: arrays in, dataclasses and plain dicts out.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -154,23 +154,47 @@ def embedding_study(data: DuffingData, derivative: str = "tvregdiff", degree: in
 DEFAULT_ETAS = (0.01, 0.02, 0.04, 0.08, 0.15, 0.25, 0.4, 0.6, 0.9, 1.3)
 
 
+Mapper = Callable[[Callable, Sequence], Iterable]
+
+
+def sweep_fit(job: tuple[DuffingData, float, str, tuple[int, int, int]]) -> dict:
+    """One fit of Figure 4's sweep, (data, eta, protocol, rng seed) -> its SNR and errors: a task of its own
+    (the sweep's fits are independent, so a caller's ``mapper`` may run them anywhere)."""
+    data, eta, protocol, seed = job
+    _, score = noisy_fit(data, eta, np.random.default_rng(list(seed)), protocol)
+    return score
+
+
+def noise_sweeps(data: DuffingData, etas: Sequence[float] = DEFAULT_ETAS, repetitions: int = 10,
+                 protocols: Sequence[str] = ("paper",), seed: int = 0, progress: Callable[[], None] | None = None,
+                 mapper: Mapper = map) -> dict[str, list[dict]]:
+    """Figure 4 for each protocol: ``repetitions`` seeded fits per eta (repetition r of level i draws from
+    ``default_rng([seed, i, r])``); SNR and error metric of each. ``mapper(func, jobs)`` runs the fits and
+    returns their results in the order of the jobs (``map``, or a cluster's); all protocols' fits go to it
+    at once."""
+    jobs = [(data, eta, proto, (seed, i, r)) for proto in protocols for i, eta in enumerate(etas)
+            for r in range(repetitions)]
+    scores = []
+    for score in mapper(sweep_fit, jobs):
+        scores.append(score)
+        if progress:
+            progress()
+    out: dict[str, list[dict]] = {}
+    for k, proto in enumerate(protocols):
+        rows = []
+        for i, eta in enumerate(etas):
+            got = scores[(k * len(etas) + i) * repetitions:(k * len(etas) + i + 1) * repetitions]
+            rows.append({"eta": float(eta), "snr_db": float(np.mean([g["snr_db"] for g in got])),
+                         "error_percent": [g["error_percent"] for g in got], "nrmse": [g["nrmse"] for g in got]})
+        out[proto] = rows
+    return out
+
+
 def noise_sweep(data: DuffingData, etas: Sequence[float] = DEFAULT_ETAS, repetitions: int = 10,
                 protocol: str = "paper", seed: int = 0,
-                progress: Callable[[], None] | None = None) -> list[dict]:
+                progress: Callable[[], None] | None = None, mapper: Mapper = map) -> list[dict]:
     """Figure 4: ``repetitions`` seeded fits per eta; SNR and error metric of each."""
-    out = []
-    for i, eta in enumerate(etas):
-        snrs, errs, nrm = [], [], []
-        for r in range(repetitions):
-            rng = np.random.default_rng([seed, i, r])
-            _, score = noisy_fit(data, eta, rng, protocol)
-            snrs.append(score["snr_db"])
-            errs.append(score["error_percent"])
-            nrm.append(score["nrmse"])
-            if progress:
-                progress()
-        out.append({"eta": float(eta), "snr_db": float(np.mean(snrs)), "error_percent": errs, "nrmse": nrm})
-    return out
+    return noise_sweeps(data, etas, repetitions, (protocol,), seed, progress, mapper)[protocol]
 
 
 def snr_below(sweep_rows: list[dict], limit_percent: float = 5.0) -> float | None:
@@ -194,12 +218,12 @@ QUICK_ETAS = (0.02, 0.08, 0.25, 0.6)
 
 
 def run_study(quick: bool = False, seed: int = 0, progress: Callable[[], None] | None = None,
-              p: DuffingParams = DuffingParams()) -> dict:
+              p: DuffingParams = DuffingParams(), mapper: Mapper = map) -> dict:
     """Tables 1-3 and Figure 4 of the paper in one run.
 
     Returns a dict with a JSON-ready part under ``"json"`` and the arrays the
     report's figures need under ``"arrays"``. ``quick`` uses 4 noise levels x 3
-    repetitions instead of 10 x 10.
+    repetitions instead of 10 x 10. ``mapper`` runs the noise sweep's fits (``map``, or a cluster's).
     """
     data = duffing_data(p)
     truth = p.true_coefficients()
@@ -214,7 +238,7 @@ def run_study(quick: bool = False, seed: int = 0, progress: Callable[[], None] |
 
     etas = QUICK_ETAS if quick else DEFAULT_ETAS
     reps = 3 if quick else 10
-    sweeps = {proto: noise_sweep(data, etas, reps, proto, seed, progress) for proto in ("paper", "realistic")}
+    sweeps = noise_sweeps(data, etas, reps, ("paper", "realistic"), seed, progress, mapper)
 
     emb = embedding_study(data)
     emb_model = emb["identification"].model

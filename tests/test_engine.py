@@ -1,0 +1,50 @@
+"""The long benchmarks as Dask tasks (ident.cli.engine): the same output as the serial run, digit for digit,
+on small case sets; results in the order of the cases however the tasks finish."""
+
+import re
+import time
+
+from clitools import run_main
+from ident.cli.engine import dask_client, mapper, run_ordered
+from ident.cli.main import main as ident_main
+from ident.paper.duffing import DuffingParams, duffing_data, noise_sweeps
+
+
+def _without_times(text: str) -> str:
+    """The bench's lines less its run times ("[3 s]" per case, the closing run-time line)."""
+    text = re.sub(r"\[\d+ s\]", "[- s]", text)
+    return "\n".join(line for line in text.splitlines() if not line.startswith("run time per case"))
+
+
+def test_bench_discovery_on_dask_prints_what_the_serial_run_prints(dask_scheduler):
+    argv = ["bench", "discovery", "--generator", "rig", "--cases", "2", "--seed", "2", "--duration", "3"]
+    code, serial, err, tb = run_main(ident_main, argv)
+    assert code == 0 and tb is None, err
+    code, dask, err, tb = run_main(ident_main, [*argv, "--scheduler", dask_scheduler])
+    assert code == 0 and tb is None, err
+    assert _without_times(dask) == _without_times(serial)
+    assert [int(m) for m in re.findall(r"^case +(\d+)", serial, re.M)] == [2, 3]
+    assert "confusion (rows true, columns named first), 2 cases:" in serial
+    assert "sensor_gain         parameter error median" in serial  # case 3 names its cause: numbers compared too
+
+
+def test_duffing_noise_sweep_on_dask_equals_the_serial_sweep(dask_scheduler):
+    data = duffing_data(DuffingParams(t_end=20.0))  # a short record keeps the four fits quick
+    args = (data, (0.25,), 2, ("paper", "realistic"), 7)
+    serial = noise_sweeps(*args, mapper=mapper(None))
+    with dask_client(dask_scheduler, None) as client:
+        dask = noise_sweeps(*args, mapper=mapper(client, "duffing"))
+    assert dask == serial  # every float equal
+    assert [len(serial[p][0]["error_percent"]) for p in ("paper", "realistic")] == [2, 2]
+    # the same draws as noise_sweep's serial loop: repetition r of level i from default_rng([seed, i, r])
+    assert serial["paper"][0]["error_percent"][0] != serial["paper"][0]["error_percent"][1]
+
+
+def _sleep_then_return(x):
+    time.sleep(0.1 * (3 - x))
+    return x
+
+
+def test_results_come_in_the_order_of_the_cases_however_they_finish(dask_scheduler):
+    with dask_client(dask_scheduler, None) as client:
+        assert list(run_ordered(client, _sleep_then_return, [0, 1, 2, 3])) == [0, 1, 2, 3]
