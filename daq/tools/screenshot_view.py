@@ -18,6 +18,7 @@ import base64
 import fcntl
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -70,6 +71,9 @@ class DevToolsPipe:
                     if "error" in reply:
                         raise RuntimeError(f"{method}: {reply['error']}")
                     return reply.get("result", {})
+            ready, _, _ = select.select([self._r], [], [], max(0.0, end - time.monotonic()))
+            if not ready:
+                break
             chunk = os.read(self._r, 1 << 20)
             if not chunk:
                 raise RuntimeError("chromium closed the DevTools pipe")
@@ -99,7 +103,8 @@ def record(source: str, duration_s: float, folder: Path) -> Path:
                str(out.with_suffix(".rrd"))]
     p = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if p.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd[2:4])} failed: {p.stderr.strip().splitlines()[-1:]}")
+        last = (p.stderr.strip().splitlines() or [f"exit {p.returncode}"])[-1]
+        raise RuntimeError(f"recording the run failed: {last}")
     return out.with_suffix(".rrd")
 
 
