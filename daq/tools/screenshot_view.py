@@ -5,7 +5,7 @@ Chromium, save a PNG.
 
 ``--source sim`` (default) records ``--duration`` seconds from the simulated rig with ``daq record
 --viewer save``; a recording (``recordings/transitions.mcap``) is replayed at full speed instead. The
-``.rrd`` is then served by the ``rerun`` executable on 127.0.0.1 (``--serve-web``), Chromium loads the
+``.rrd`` is compacted (``rerun rrd optimize``) and served by the ``rerun`` executable on 127.0.0.1 (``--serve-web``), Chromium loads the
 web viewer and is driven over its DevTools pipe (``--remote-debugging-pipe``: JSON messages separated
 by NUL bytes on file descriptors 3 and 4, no network port, no extra package): wait ``--wait`` seconds of
 real time for the viewer to load and draw, then ``Page.captureScreenshot``.
@@ -108,6 +108,16 @@ def record(source: str, duration_s: float, folder: Path) -> Path:
     return out.with_suffix(".rrd")
 
 
+def compact(rrd: Path, folder: Path) -> Path:
+    """``rerun rrd optimize``: a live recording holds a chunk per block and entity (thousands), which the web
+    viewer ingests slowly; compacted, the same data loads in seconds."""
+    out = folder / f"{rrd.stem}-compact.rrd"
+    p = subprocess.run([_rerun_exe(), "rrd", "optimize", str(rrd), "-o", str(out)], capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(f"rerun rrd optimize failed: {(p.stderr.strip().splitlines() or ['?'])[-1]}")
+    return out
+
+
 def screenshot(rrd: Path, png: Path, wait_s: float) -> None:
     bind = "127.0.0.1"
     grpc, web = free_port(bind, 19876), free_port(bind, 19090)
@@ -158,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         with tempfile.TemporaryDirectory(prefix="screenshot-view-") as tmp:
-            rrd = args.rrd or record(args.source, args.duration, Path(tmp))
+            rrd = compact(args.rrd or record(args.source, args.duration, Path(tmp)), Path(tmp))
             screenshot(rrd, args.output, args.wait)
     except (RuntimeError, TimeoutError, ValueError, OSError) as exc:
         print(f"screenshot_view: {exc}", file=sys.stderr)
