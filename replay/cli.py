@@ -69,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--start", type=OFFSET, default=0.0, help="start this many seconds into the data")
     pl.add_argument("--duration", type=DURATION, help="play this many seconds")
     pl.add_argument("--loop", action="store_true", help="start again at the end, until Ctrl-C")
-    add_live_options(pl, "the input")
+    add_live_options(pl, "--events or --models, else in the current folder, never beside the input")
     pl.add_argument("--rrd", type=Path, help="with --viewer save: the .rrd to write")
     pl.add_argument("--models", type=Path, help="write each window's model (per beam) as JSON lines here")
     pl.add_argument("--force", action="store_true", help="replace existing output files")
@@ -105,10 +105,20 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def default_rrd(args) -> Path:
+    """Where ``--viewer save`` writes without ``--rrd``: beside an output (``--events``, ``--models``), else in
+    the current folder; never beside the input (that would fill ``recordings/`` with views)."""
+    name = Path(args.file).with_suffix(".rrd").name
+    for out in (args.events, args.models):
+        if out is not None:
+            return Path(out).with_suffix(".rrd")
+    return Path.cwd() / name
+
+
 def play_cmd(args) -> int:
     check_live(args)
     mode = resolve_mode(args.viewer)
-    rrd = (args.rrd or Path(args.file).with_suffix(".rrd")) if mode == "save" else None
+    rrd = (args.rrd or default_rrd(args)) if mode == "save" else None
     outputs = [Output("--events", args.events), Output("--models", args.models), Output("--viewer save", rrd)]
     outputs += [Output(o.label, part_path(o.path), replaceable=False) for o in list(outputs) if o.path is not None]
     check_outputs(outputs, [args.file], args.force)

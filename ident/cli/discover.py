@@ -24,12 +24,15 @@ from replay.formats import format_of, mcap, read_column_matrix, read_samples
 from . import parse_split
 from ..config import build
 from ..discovery import Channel, Discovery, Measurement, discover, to_json
-from ..discovery.search import predict
+from ..discovery.search import Settings, predict
 from ..discovery.signals import EXCITATIONS, RESPONSES
 from ..rig import RigParams
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+
+P_SIGNIFICANT, GAIN_FLOOR = Settings().alpha, Settings().gain_floor  # the search's defaults, drawn on ranking.png
 
 
 def add_parser(sub) -> None:
@@ -174,18 +177,29 @@ def _params(p: dict) -> str:
 
 def _ranking(d: Discovery, path: Path) -> None:
     cands = [c for c in d.candidates if np.isfinite(c.gain)][:15]
-    fig, ax = plt.subplots(figsize=(8, 0.35 * len(cands) + 1.6))
+    fig, ax = plt.subplots(figsize=(8.5, 0.35 * len(cands) + 2.0))
     chosen = {f.label for f in d.findings}
     labels = [f"{c.cause} at {c.location}{' (refined)' if c.refined else ''}" for c in cands]
-    colors = ["tab:green" if c.label in chosen and c.refined else "tab:blue" if c.p_value < 0.05 else "tab:gray"
+    colors = ["tab:green" if c.label in chosen and c.refined else "tab:blue" if c.p_value < P_SIGNIFICANT else "tab:gray"
               for c in cands]
     ax.barh(range(len(cands)), [c.gain for c in cands], color=colors)
+    for i, c in enumerate(cands):  # each bar's p-value, and the finding marked
+        mark = "  <- chosen" if c.label in chosen and c.refined else ""
+        ax.text(max(c.gain, GAIN_FLOOR) + 0.008, i, f"p = {c.p_value:.2g}{mark}", va="center", fontsize=7,
+                fontweight="bold" if mark else "normal")
     ax.set_yticks(range(len(cands)), labels, fontsize=8)
     ax.invert_yaxis()
-    ax.axvline(0.03, color="k", ls="--", lw=1, label="gain floor 0.03")
-    ax.set_xlabel("held-out gain, 1 - NRMSE extended / NRMSE baseline")
-    ax.set_title("Causes ranked by held-out gain (green: the finding; blue: significant, p < 0.05)")
-    ax.legend(loc="lower right", fontsize=8)
+    ax.axvline(GAIN_FLOOR, color="k", ls="--", lw=1, label=f"gain floor {GAIN_FLOOR:g}")
+    handles = [Patch(color="tab:green", label="the finding (chosen cause)"),
+               Patch(color="tab:blue", label=f"significant: p < {P_SIGNIFICANT:g} (paired test, held-out pieces)"),
+               Patch(color="tab:gray", label=f"not significant: p >= {P_SIGNIFICANT:g}")]
+    ax.legend(handles=handles + ax.get_legend_handles_labels()[0], loc="lower right", fontsize=7)
+    hi = max([c.gain for c in cands] + [GAIN_FLOOR])
+    ax.set_xlim(right=hi + 0.25 * (hi - min([c.gain for c in cands] + [0.0])))
+    ax.set_xlabel("held-out gain [-], 1 - NRMSE extended / NRMSE baseline")
+    ax.set_title("Causes ranked by held-out gain\n" + ("finding: " + ", ".join(sorted(chosen)) if chosen
+                                                         else "no finding: no cause passes both thresholds"),
+                 fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -212,23 +226,31 @@ def _time_and_spectrum(d: Discovery, path: Path) -> None:
                          fontsize=8)
             ax.set_xlabel("time [s]")
             ax.set_ylabel(f"{prep.kinds[i]} [{units[prep.kinds[i]]}]", fontsize=8)
-    axes[0, 0].legend(fontsize=7, loc="upper right")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper right", ncol=len(labels), fontsize=8)  # above the panels, on no data
+    tests = list(d.split.test)
+    resid = [prep.measured[s] - predict(d.baseline, d.baseline.model, prep, s, d.warm) for s in tests]
     for i in range(k):
         ax = axes[i, -1]
-        rows = d.split.rows("test")
-        nper = min(len(rows), int(2 ** np.floor(np.log2(max(64, prep.fs_hz / prep.band[0] * 8)))))
-        f, p = welch(prep.measured[rows, i], prep.fs_hz, nperseg=nper)
+        # Welch within each held-out block, averaged over the blocks: no segment spans two blocks
+        shortest = min(s.stop - s.start for s in tests)
+        nper = min(shortest, int(2 ** np.floor(np.log2(max(64, prep.fs_hz / prep.band[0] * 8)))))
+        f = welch(prep.measured[tests[0], i], prep.fs_hz, nperseg=nper)[0]
+        p = np.mean([welch(prep.measured[s, i], prep.fs_hz, nperseg=nper)[1] for s in tests], axis=0)
+        pr = np.mean([welch(r[:, i], prep.fs_hz, nperseg=nper)[1] for r in resid], axis=0)
         ax.semilogy(f, p, "k", lw=1, label="measured")
-        res = np.concatenate([prep.measured[s, i] - predict(d.baseline, d.baseline.model, prep, s, d.warm)[:, i]
-                              for s in d.split.test])
-        ax.semilogy(*welch(res, prep.fs_hz, nperseg=nper), "tab:red", lw=0.8, label="baseline residual")
-        ax.set_xlim(0, prep.band[1])
+        ax.semilogy(f, pr, "tab:red", lw=0.8, label="baseline residual")
+        ax.axvspan(prep.band[0], prep.band[1], color="0.9", zorder=0, label="analysis band")
+        ax.set_xlim(0, 1.1 * prep.band[1])
+        inband = (f >= prep.band[0]) & (f <= prep.band[1])
+        floor = min(np.min(p[inband]), np.min(pr[inband])) if inband.any() else np.min(p)
+        ax.set_ylim(bottom=max(floor / 10, 1e-300))  # the band's content, not the filter's stop band
         ax.set_xlabel("frequency [Hz]")
         ax.set_ylabel(f"PSD [({units[prep.kinds[i]]})$^2$/Hz]", fontsize=8)
-        ax.set_title(f"{prep.names[i]}: spectra over the held-out blocks", fontsize=8)
+        ax.set_title(f"{prep.names[i]}: spectra, mean over the held-out blocks", fontsize=8)
         ax.legend(fontsize=7)
-    fig.suptitle(d.verdict(), fontsize=9)
-    fig.tight_layout()
+    fig.suptitle(d.verdict(), fontsize=9, x=0.02, ha="left")
+    fig.tight_layout(rect=(0, 0, 1, 0.95))
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

@@ -94,6 +94,8 @@ class WindowFit:
     measured: np.ndarray  # (n, 2, 2): sample, beam, (z, v)
     predicted: np.ndarray  # (n, 2, 2): the model integrated over the window with the measured base
     final: bool = True  # False: a refined fit of this window follows (the first fit is the sweep's choice)
+    base: np.ndarray | None = None  # (n,) the base acceleration at the identification samples [m/s^2]
+    accel: np.ndarray | None = None  # (n, 2) the relative accelerations r_i = v_i' there [m/s^2]
 
 
 def _active(model: SindyModel) -> tuple[str, ...]:
@@ -231,7 +233,7 @@ class RollingIdentifier:
                     todo[i] = (xs, dx, bound, prev)
             fits.append(self._beam_fit(i, coefs, err, lam, xs, dx, base, z[:, i], prev, index, 0))
         meas = np.stack([np.column_stack([z[:, i], v[:, i]]) for i in range(2)], axis=1)
-        fit = WindowFit(t_end, (fits[0], fits[1]), t, meas, pred, final=not todo)
+        fit = WindowFit(t_end, (fits[0], fits[1]), t, meas, pred, final=not todo, base=base, accel=r)
         if todo:
             self._pending = (fit, todo, base, z, index)
         return fit
