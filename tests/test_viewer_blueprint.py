@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
+from daq.tools import screenshot_view
 from daq.viewer import PANELS, nice_ticks, transfer_estimates
 from ident.cli.fit import cycles_window
 
@@ -105,3 +106,15 @@ def test_fit_figure_shows_four_cycles_of_the_strongest_frequency():
     x = np.sin(2 * np.pi * 12.5 * t) + 0.3 * np.sin(2 * np.pi * 37.5 * t)
     assert cycles_window(x, 200.0) == pytest.approx(4 / 12.5, rel=0.01)
     assert cycles_window(x[:40], 200.0) == pytest.approx(0.2)  # shorter than 4 cycles: all of it
+
+
+def test_screenshot_script_never_replaces_a_file_without_force(tmp_path, capsys):
+    png = tmp_path / "view.png"
+    png.write_bytes(b"precious")
+    assert screenshot_view.main(["-o", str(png), "--duration", "1"]) == 2
+    assert png.read_bytes() == b"precious"
+    assert "exists; give --force" in capsys.readouterr().err
+    src = tmp_path / "rec.mcap"
+    src.write_bytes(b"mcap")
+    assert screenshot_view.main(["-o", str(src), "--source", str(src), "--force"]) == 2
+    assert src.read_bytes() == b"mcap" and "is the input" in capsys.readouterr().err

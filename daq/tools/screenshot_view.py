@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 from urllib.parse import quote
 
-from daq.safeio import safe_output
+from daq.safeio import Output, check_outputs, safe_output
 from daq.viewer import _rerun_exe, _wait_listening, free_port
 
 CHROMIUM = "/usr/bin/chromium"
@@ -118,7 +118,7 @@ def compact(rrd: Path, folder: Path) -> Path:
     return out
 
 
-def screenshot(rrd: Path, png: Path, wait_s: float) -> None:
+def screenshot(rrd: Path, png: Path, wait_s: float, *, force: bool = False, inputs: tuple = ()) -> None:
     bind = "127.0.0.1"
     grpc, web = free_port(bind, 19876), free_port(bind, 19090)
     server = subprocess.Popen([_rerun_exe(), "--serve-web", "--bind", bind, "--port", str(grpc),
@@ -141,7 +141,7 @@ def screenshot(rrd: Path, png: Path, wait_s: float) -> None:
             chrome.call("Page.navigate", session, url=url)
             time.sleep(wait_s)  # the viewer's wasm bundle loads, the recording streams in, the plots draw
             data = chrome.call("Page.captureScreenshot", session, format="png")["data"]
-            with safe_output(png, inputs=[rrd], force=True, label="-o") as tmp:
+            with safe_output(png, inputs=[rrd, *inputs], force=force, label="-o") as tmp:
                 tmp.write_bytes(base64.b64decode(data))
             chrome.close()
             chrome = None
@@ -162,14 +162,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=float, default=20.0, help="seconds to record from the simulated rig")
     p.add_argument("--wait", type=float, default=40.0, help="seconds to let the web viewer load and draw")
     p.add_argument("--rrd", type=Path, help="screenshot this .rrd instead of recording one")
+    p.add_argument("--force", action="store_true", help="replace an existing --output")
     args = p.parse_args(argv)
-    if not os.path.exists(CHROMIUM):
-        print(f"screenshot_view: {CHROMIUM} not found (Debian package chromium)", file=sys.stderr)
-        return 2
+    inputs = (args.rrd, None if args.source == "sim" else Path(args.source))
     try:
+        check_outputs([Output("-o", args.output)], inputs, args.force)  # before minutes of recording
+        if not os.path.exists(CHROMIUM):
+            raise RuntimeError(f"{CHROMIUM} not found (Debian package chromium)")
         with tempfile.TemporaryDirectory(prefix="screenshot-view-") as tmp:
             rrd = compact(args.rrd or record(args.source, args.duration, Path(tmp)), Path(tmp))
-            screenshot(rrd, args.output, args.wait)
+            screenshot(rrd, args.output, args.wait, force=args.force, inputs=inputs)
     except (RuntimeError, TimeoutError, ValueError, OSError) as exc:
         print(f"screenshot_view: {exc}", file=sys.stderr)
         return 2
