@@ -86,10 +86,12 @@ def check_rate(fs_hz: float | None, what: str = "--fs") -> float:
 def even_grid(samples: Samples) -> tuple[np.ndarray, np.ndarray]:
     """Samples on their uniform grid for formats without holes (UFF 58, TDMS waveforms): values with lost
     frames filled by linear interpolation, and the sequence number of each row (-1 where filled). Takes
-    samples read either way (``fill`` or not)."""
+    samples read either way (``fill`` or not); fewer than two samples make no time history (ValueError)."""
     n = len(samples.t)
+    if n < 2:
+        raise ValueError(f"{samples.source}: fewer than two samples; nothing to write as a time history")
     seq = np.arange(n) if samples.seq is None else np.asarray(samples.seq, np.int64)
-    if np.any(seq < 0) or n < 2:
+    if np.any(seq < 0):
         return samples.values, seq
     index = np.rint(np.asarray(samples.t) * samples.fs_hz).astype(np.int64)
     if np.any(np.diff(index) <= 0):

@@ -135,8 +135,6 @@ def write_samples(path: str | Path, samples: Samples, *, force: bool = False, in
     """Group ``rig``: base, tip1, tip2 as even waveforms in m/s^2, t and seq (see the module doc)."""
     values, seq = even_grid(samples)
     filled = int(np.count_nonzero(seq < 0))
-    if values.shape[0] < 2:
-        raise ValueError(f"{samples.source}: fewer than two samples; nothing to write")
     n = values.shape[0]
     cal = samples.metadata.get("calibration", {}) if samples.metadata else {}
     inc = 1.0 / samples.fs_hz

@@ -153,8 +153,6 @@ def write_samples(path: str | Path, samples: Samples, *, force: bool = False, in
     """Three datasets 58 (base, tip1, tip2) in m/s^2 on an even time grid (see the module doc)."""
     values, seq = even_grid(samples)
     filled = int(np.count_nonzero(seq < 0))
-    if values.shape[0] < 2:
-        raise ValueError(f"{samples.source}: fewer than two samples; nothing to write as a time history")
     t = np.arange(values.shape[0]) / samples.fs_hz
     date = time.strftime("%d-%b-%y %H:%M:%S")
     sets = []
