@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import stat
 import tempfile
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
@@ -268,10 +267,3 @@ def part_path(path: str | Path) -> Path:
     """Where a streamed output lives until it is complete: ``NAME.part``."""
     p = Path(path)
     return p.with_name(p.name + ".part")
-
-
-def is_regular_file(path: str | Path) -> bool:
-    try:
-        return stat.S_ISREG(os.stat(path).st_mode)
-    except OSError:
-        return False

@@ -43,10 +43,6 @@ class RecoverReport:
     def total_messages(self) -> int:
         return sum(self.messages.values())
 
-    @property
-    def stopped_at(self) -> str:
-        return "; ".join(d.describe() for d in self.damage)
-
 
 def _accel_seq(data: bytes) -> int | None:
     try:

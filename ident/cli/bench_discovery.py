@@ -94,10 +94,9 @@ def judge(case: Case, d, seconds: float) -> Verdict:
     else:
         named, loc = findings[0].cause, findings[0].location
         right = cause != "none" and named == cause and _same_location(loc, case.location)
-    extra = len(findings) if cause == "none" else max(0, len(findings) - 1) + (0 if right or not findings else 0)
-    if cause != "none" and findings and not right:
-        extra = len(findings) - (1 if any(f.cause == cause and _same_location(f.location, case.location)
-                                          for f in findings) else 0)
+    # every finding that is not the true cause at the true location is a false extra one
+    extra = len(findings) - int(cause != "none" and any(f.cause == cause and _same_location(f.location, case.location)
+                                                        for f in findings))
     perr = gain = None
     if right and cause in COMPARED:
         tkey, fkey = COMPARED[cause]

@@ -181,10 +181,6 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
 # --- regression ---------------------------------------------------------------------------------------
 
 
-def linear_part(model: LinearModel) -> LinearModel:
-    return LinearModel(model.poles, model.B, model.C)
-
-
 def force_responses(model: LinearModel, prep: Prepared, h: np.ndarray, gains: list[np.ndarray]) -> np.ndarray:
     """Band-passed responses (n, k, len(gains)) of the linear part to the force series h entering with
     each gain vector (the force band-passed first: for a linear model that is the same)."""
