@@ -37,8 +37,16 @@ def _loads(text: str, default):
     return json.loads(text) if text else default
 
 
-def _legend_outside(ax) -> None:
+def _finish(fig, ax, path: Path, ylabel: str, title: str) -> None:
+    """The campaign axis (recordings by number), labels, the legend outside the data, saved and closed."""
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("recording (number in the table's order, listed in README.md)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _mark_errors(ax, rows: list[dict], x: np.ndarray, what: str) -> None:
@@ -94,15 +102,9 @@ def figure_natural_frequency(rows: list[dict], path: Path) -> None:
     if not any(math.isfinite(trusted_frequency(r, b)) for r in rows for b in (1, 2)):
         ax.text(0.5, 0.5, "no natural frequency to trust (see the legend)", transform=ax.transAxes, ha="center")
     ax.set_xlim(-0.5, len(rows) - 0.5)
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_xlabel("recording (number in the table's order, listed in README.md)")
-    ax.set_ylabel("natural frequency [Hz]")
-    ax.set_title("Natural frequency of each beam across the campaign (SINDy in physical coordinates)", fontsize=10)
     ax.grid(alpha=0.3)
-    _legend_outside(ax)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, ax, path, "natural frequency [Hz]",
+            "Natural frequency of each beam across the campaign (SINDy in physical coordinates)")
 
 
 def figure_regimes(rows: list[dict], path: Path) -> None:
@@ -116,14 +118,8 @@ def figure_regimes(rows: list[dict], path: Path) -> None:
             ax.bar(x, h, bottom=bottom, width=0.85, color=REGIME_COLORS.get(label), label=label)
             bottom += h
     _mark_errors(ax, rows, x, "regimes")
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_xlabel("recording (number in the table's order, listed in README.md)")
-    ax.set_ylabel("time in the regime [s]")
-    ax.set_title("Regimes of each recording (regime monitor)", fontsize=10)
-    _legend_outside(ax)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, ax, path, "time in the regime [s]",
+            "Regimes of each recording (regime monitor)")
 
 
 def _first_finding(r: dict) -> str:
@@ -147,14 +143,8 @@ def figure_findings(rows: list[dict], path: Path) -> None:
     _mark_errors(ax, rows, x, "discovery")
     ax.axhline(0.03, color="k", ls="--", lw=0.8, label="gain floor 0.03")
     ax.set_xlim(-0.5, len(rows) - 0.5)
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_xlabel("recording (number in the table's order, listed in README.md)")
-    ax.set_ylabel("held-out gain, 1 - NRMSE extended / baseline")
-    ax.set_title("Discovery's first finding per recording and the extended model's held-out gain", fontsize=10)
-    _legend_outside(ax)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, ax, path, "held-out gain, 1 - NRMSE extended / baseline",
+            "Discovery's first finding per recording and the extended model's held-out gain")
 
 
 def _fmt(text: str, digits: int = 3) -> str:
