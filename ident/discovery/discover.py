@@ -87,8 +87,6 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
         else:
             baseline = ModalBaseline.fit(prep, split.rows("train"), poles0=poles0)
     warm = _warm(baseline, prep)
-    test_rows = split.rows("test")
-    scale = np.maximum(prep.measured[test_rows].std(axis=0), 1e-300)
     bound = 50.0 * float(np.max(np.abs(prep.zva[0]))) + 1e-300
 
     # unmodelled transients: isolated bursts of the baseline's error
