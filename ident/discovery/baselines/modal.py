@@ -86,6 +86,13 @@ def _nrmse(fit: np.ndarray, meas: np.ndarray) -> float:
     return float(np.mean(_per_response(fit, meas)))
 
 
+def admissible(poles: np.ndarray, prep: Prepared) -> bool:
+    """Poles a refinement may return: stable, and every natural frequency below Nyquist (an unbounded
+    search once sent a mode to 1e12 Hz with no damping, and every simulation of the baseline diverged)."""
+    return bool(np.all(np.isfinite(poles)) and np.all(poles.real < 0)
+                and np.all(np.abs(poles) < 2 * np.pi * 0.49 * prep.fs_hz))
+
+
 def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(), forces=(),
                  max_nfev: int = 20, stride: int = 2) -> np.ndarray:
     """Poles by least squares on the fit error over ``rows`` (every ``stride``-th) with the residues solved
@@ -98,6 +105,8 @@ def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(
         return -np.exp(x[:m]) + 1j * np.exp(x[m:])
 
     def resid(x):
+        if not admissible(unpack(x), prep):
+            return np.full(sub.size * scale.size, 1e3)
         _, fit = fit_residues(unpack(x), prep, sub, elements, forces)
         if not np.all(np.isfinite(fit)):
             return np.full(sub.size * scale.size, 1e3)
@@ -108,7 +117,7 @@ def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(
         x = least_squares(resid, x0, max_nfev=max_nfev, x_scale=0.01, diff_step=1e-5).x
     except (np.linalg.LinAlgError, ValueError):
         return poles
-    return unpack(x)
+    return unpack(x) if admissible(unpack(x), prep) else poles
 
 
 def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces: list[np.ndarray],
@@ -155,6 +164,8 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
     sub = rows[::st]
 
     def resid(x):
+        if not admissible(unpack(x), prep):
+            return np.full(sub.size * scale.size, 1e3)
         try:
             return ((solve(unpack(x), sub)[2] - prep.measured[sub]) / scale).ravel()
         except ValueError:
@@ -164,6 +175,8 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
     try:
         poles = unpack(least_squares(resid, x0, max_nfev=max_nfev, x_scale=0.01, diff_step=1e-5).x)
     except (np.linalg.LinAlgError, ValueError):
+        poles = np.asarray(poles0, complex)
+    if not admissible(poles, prep):
         poles = np.asarray(poles0, complex)
     C, D, fit = solve(poles, rows)
     return poles, C, D, _nrmse(fit, prep.measured[rows])
