@@ -134,9 +134,11 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
                 continue
             if c is not None:
                 cands.append(c)
-    # a fitted baseline absorbed part of any nonlinearity: the best regressions are fitted again together
-    # with its linear part (their shapes searched again), the rest keep the baseline's
-    if hasattr(baseline, "fit_jointly"):
+    # a baseline fitted to this record absorbed part of any nonlinearity: the best regressions are fitted
+    # again together with its linear part (their shapes searched again), the rest keep the baseline's. A
+    # baseline fitted to a separate (low-level) record has seen no nonlinearity: its linear part stays.
+    joint = fit_data is None and hasattr(baseline, "fit_jointly")
+    if joint:
         order = sorted(range(len(cands)), key=lambda i: -cands[i].fit_r2)[:settings.max_joint]
         for i in order:
             loc = next(loc for loc in ranked if loc.name == cands[i].location)
@@ -159,12 +161,14 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
         rank = (c.fit_r2, c.baseline is not None)  # a jointly fitted version before its plain twin
         if c.elements and (c.cause not in leaders or rank > (leaders[c.cause].fit_r2, leaders[c.cause].baseline is not None)):
             leaders[c.cause] = c
+    fit_record = None if fit_data is None else (prep_fit, (slice(prep_fit.edge, prep_fit.n - prep_fit.edge),))
     refined = []
     for c in sorted(leaders.values(), key=lambda c: -c.fit_r2)[:settings.max_refined]:
         if c.fit_r2 <= 0.01:
             continue
         try:
-            refined.append(refine(c, baseline, by_loc[c.location], prep, split, warm, scale, bound, settings))
+            refined.append(refine(c, baseline, by_loc[c.location], prep, split, warm, scale, bound, settings,
+                                  joint=joint, fit=fit_record))
         except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
             notes.append(f"{c.label}: refinement failed ({exc})")
     scored = [score(c, baseline, prep, split, sc) for c in cands + refined]

@@ -391,15 +391,22 @@ def joint_refit(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared,
 
 
 def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, split: Split, warm: int,
-           scale: np.ndarray, bound: float, settings: Settings) -> Candidate:
-    """Refine a mechanical candidate by simulation error on the busiest training blocks: a fitted baseline
-    is first refitted jointly with it (``joint_refit``); then its coefficients are scaled (log, within
+           scale: np.ndarray, bound: float, settings: Settings, joint: bool = True,
+           fit: tuple[Prepared, tuple[slice, ...]] | None = None) -> Candidate:
+    """Refine a mechanical candidate by simulation error on the busiest training blocks: a baseline fitted
+    to this record is first refitted jointly with it (``joint_refit``, if ``joint``); a baseline fitted
+    to a separate record (``fit``: its preparation and segments, a low level) is refitted there with the
+    candidate in place, before and after the refinement (the cause acts at the low level too: the linear
+    part fitted there without it holds the cause's equivalent stiffness and damping twice); then its coefficients are scaled (log, within
     a factor e^2, e^5 for a stopper's or a joint's stiffness); a contact's side, gap and stiffness are
     scanned first (a stiff stopper's error is a narrow valley in the gap), a joint's slip displacement
     is scaled too."""
     if not c.elements:
         return c
-    if c.baseline is None:
+    base0 = baseline
+    if fit is not None:
+        c = replace(c, baseline=base0.refit(fit[0], fit[1], c.elements))
+    elif joint and c.baseline is None:
         c = joint_refit(c, baseline, loc, prep, split, warm, scale)
     baseline = c.baseline or baseline
     segs = busiest(prep, split, loc.weights, settings.refine_blocks)
@@ -463,8 +470,10 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
         if cand is not None and e < best[0]:
             best = (e, cand)
     e, cand = best
-    cand = replace(cand, refined=True, train_nrmse=e)
-    return cand
+    if fit is not None:
+        cand = replace(cand, baseline=base0.refit(fit[0], fit[1], cand.elements))
+        e = _train_error(base0, cand, prep, segs, warm, scale, bound)
+    return replace(cand, refined=True, train_nrmse=e)
 
 
 # --- selection ----------------------------------------------------------------------------------------
