@@ -145,7 +145,7 @@ def record(args) -> int:
     check_live(args)
     cfg = link_config(args)
     out = args.output or Path(time.strftime("rig-%Y%m%d-%H%M%S.mcap"))
-    mode = "none" if args.no_identify else resolve_mode(args.viewer)
+    mode = resolve_mode(args.viewer)
     rrd = out.with_suffix(".rrd") if mode == "save" else None
     inputs = [args.config, _port_input(args.port)]
     outputs = [Output("-o", out), Output("-o", part_path(out), replaceable=False), Output("--events", args.events),
@@ -263,7 +263,7 @@ class LiveProcessing:
         self.fs_hz = fs_hz
         self.jsonl = JsonlEvents(events_path, force=force, inputs=inputs) if events_path else None
         try:
-            self.viewer = RerunViewer(viewer_mode if identify else "none", rrd_path=rrd_path, fs_hz=fs_hz,
+            self.viewer = RerunViewer(viewer_mode, rrd_path=rrd_path, fs_hz=fs_hz,
                                       bind=bind, force=force, inputs=inputs)
         except BaseException:
             if self.jsonl:
