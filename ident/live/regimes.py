@@ -178,17 +178,17 @@ def decide(prev: Decision, p: tuple[float, float], cfg: RegimeConfig) -> tuple[D
       i.e. when it would set the beams' states whatever they were before. Windows with p inside the band
       (a beam grazing its stopper, the beating while a drive change passes) keep the label they inherit
       from the hysteresis but neither count towards the dwell nor break it: a regime that only flickers
-      in through the band is not reported, a change that the data shows clearly is reported after
-      exactly ``dwell`` windows (0.5 s with the default 0.25 s hop, as before), and a regime that stays
-      unclear is still reported after ``max_dwell`` windows (2 s).
+      in through the band is not reported, a change that the data shows clearly is reported at exactly
+      its ``dwell``-th window (with the defaults the second, 0.25 s after the first, as before), and a
+      regime that stays unclear is still reported at its ``max_dwell``-th window (1.75 s after the first).
     - The first window reports the starting regime (no change).
 
-    Measured on the independent generator's programmes (``daq bench --regimes``, 2-minute cases, seeds
-    0-15, where the thresholds were set): false changes 30 -> 22 against the plain two-window dwell, the
-    same changes reported within 1 s; a longer plain dwell (three windows) gives 17 but three changes
-    late. Most false changes left are real intermediate regimes shorter than the benchmark's 1 s (one
-    beam leaving its stopper a few periods before the other), which a causal monitor cannot both skip and
-    report within 1 s when they last.
+    Measured on the independent generator's programmes through the four regimes (those of ``daq bench
+    --regimes``, seeds 0-15, where the thresholds were set): false changes 30 -> 22 against the plain
+    two-window dwell, the same changes reported within 1 s; a longer plain dwell (three windows) gives
+    17 but reports three changes late. Most false changes left are real intermediate regimes shorter
+    than the benchmark's 1 s (one beam leaving its stopper a few periods before the other): a causal
+    monitor cannot skip those without reporting some true changes later than 1 s.
     """
     h = cfg.hysteresis
     hit = tuple(bool(pi > 0.5 - h) if was else bool(pi > 0.5 + h) for pi, was in zip(p, prev.hit))
