@@ -121,7 +121,8 @@ def _live(args, py, c_start, w_start) -> None:
         share_live = (c_live - c_start) / (w_live - w_start)
         share_rec = (c_rec - c_start) / (w_rec - w_start)
         print(f"live record  : CPU {100 * share_live:5.1f} % of one core with the pipeline, {100 * share_rec:5.1f} % "
-              f"recording only; the pipeline adds {100 * (share_live - share_rec):5.1f} %")
+              f"with --no-identify (filters and regime monitor); identification adds "
+              f"{100 * (share_live - share_rec):5.1f} %")
         _latency("latency warm ", res.stdout)
         # the first run after an install: numba's cache empty (a fresh folder), so the kernels compile
         env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(tmp) / "numba-cache")}

@@ -145,7 +145,7 @@ def record(args) -> int:
     check_live(args)
     cfg = link_config(args)
     out = args.output or Path(time.strftime("rig-%Y%m%d-%H%M%S.mcap"))
-    mode = "none" if args.no_identify else resolve_mode(args.viewer)
+    mode = resolve_mode(args.viewer)
     rrd = out.with_suffix(".rrd") if mode == "save" else None
     inputs = [args.config, _port_input(args.port)]
     outputs = [Output("-o", out), Output("-o", part_path(out), replaceable=False), Output("--events", args.events),
@@ -170,10 +170,11 @@ def record(args) -> int:
         # before the port opens, so that a device's bytes do not wait in the port's buffer meanwhile
         compile_s = 0.0 if args.no_identify else compile_kernels()
         acq.open()  # a wrong port fails here, before any file exists
-        if not args.no_identify or args.events:
-            live = LiveProcessing(cfg.daq.rate_hz, mode, rrd, args.events, args.window, args.hop, args.bind,
-                                  force=args.force, inputs=inputs, identify=not args.no_identify, gaps=args.gaps,
-                                  compile_s=compile_s)
+        # always: --no-identify leaves out the rolling SINDy only; the filters and the regime monitor run,
+        # and its events go to the recording (and to --events)
+        live = LiveProcessing(cfg.daq.rate_hz, mode, rrd, args.events, args.window, args.hop, args.bind,
+                              force=args.force, inputs=inputs, identify=not args.no_identify, gaps=args.gaps,
+                              compile_s=compile_s)
         try:
             rec = McapRecorder(out, cfg, port=port, force=args.force, inputs=inputs, accel_json=args.accel_json)
         except BaseException:
@@ -234,7 +235,7 @@ def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | No
     print(f"{out}: {st['samples']} samples, {st['dropped_frames']} dropped, {st['duplicates']} duplicates, "
           f"{link}, {st['reconnects']} reconnects, {st['restarts']} device restarts, "
           f"{size} bytes ({per:.1f} bytes per 3-channel sample)")
-    if live is not None and live.identify:
+    if live is not None:
         print(live.summary())
     if acq.error:
         raise ValueError(f"recording stopped: {acq.error}; what came before is kept in {out}")
@@ -253,15 +254,16 @@ class LiveProcessing:
                  window_s: float = 4.0, hop_s: float = 1.0, bind: str = DEFAULT_BIND, *, force: bool = False,
                  inputs=(), identify: bool = True, gaps: tuple[float, float] | None = None,
                  compile_s: float | None = None):
-        self.identify = identify
-        self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, rolling=rolling_config(fs_hz, window_s, hop_s),
+        self.identify = identify  # False: filters and the regime monitor only (no rolling SINDy)
+        self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, identify=identify,
+                                            rolling=rolling_config(fs_hz, window_s, hop_s),
                                             regime=RegimeConfig(fs_hz=fs_hz, gap_m=gaps)))
         # the kernels compiled before the first sample (``compile_s``: the caller already did, so long)
         self.compile_s = compile_s if compile_s is not None else (compile_kernels() if identify else 0.0)
         self.fs_hz = fs_hz
         self.jsonl = JsonlEvents(events_path, force=force, inputs=inputs) if events_path else None
         try:
-            self.viewer = RerunViewer(viewer_mode if identify else "none", rrd_path=rrd_path, fs_hz=fs_hz,
+            self.viewer = RerunViewer(viewer_mode, rrd_path=rrd_path, fs_hz=fs_hz,
                                       bind=bind, force=force, inputs=inputs)
         except BaseException:
             if self.jsonl:
@@ -279,12 +281,9 @@ class LiveProcessing:
         self._timeline: collections.deque = collections.deque()
         self._keep = int((window_s + 2 * hop_s + 5.0) * fs_hz)
         self.thread = threading.Thread(target=self._work, daemon=True)
-        if identify:
-            self.thread.start()
+        self.thread.start()
 
     def submit(self, block) -> None:
-        if not self.identify:
-            return
         self._timeline.append((self._submitted, np.asarray(block.t_s, float)))
         self._submitted += len(block)
         while self._timeline and self._timeline[0][0] + len(self._timeline[0][1]) < self._submitted - self._keep:
@@ -367,9 +366,8 @@ class LiveProcessing:
             self.jsonl.abort()
 
     def close(self) -> None:
-        if self.identify:
-            self.inq.put(None)
-            self.thread.join(timeout=60)
+        self.inq.put(None)
+        self.thread.join(timeout=60)
         self.viewer.close()
         if self.jsonl:
             self.jsonl.close()
@@ -377,7 +375,8 @@ class LiveProcessing:
     def summary(self) -> str:
         lat = np.array(self.latencies)
         p = (f"latency sample -> model update p50 {1e3 * np.percentile(lat, 50):.0f} ms, "
-             f"p95 {1e3 * np.percentile(lat, 95):.0f} ms" if lat.size else "no model update")
+             f"p95 {1e3 * np.percentile(lat, 95):.0f} ms" if lat.size
+             else "no model update" if self.identify else "no identification (--no-identify)")
         return (f"live: {len(self.latencies)} model updates, {len(self.regimes)} regime changes, {p}"
                 + (f"; kernels compiled in {self.compile_s:.1f} s before the first sample" if self.compile_s > 1.0
                    else "") + (f"; ERROR {self.error}" if self.error else ""))

@@ -9,7 +9,8 @@ import pytest
 from daq.sim.excitation import Kick, Step
 from daq.sim.rig import RigConfig, simulate_rig
 from daq.sim.sensors import to_counts
-from ident.live.regimes import LABELS, RegimeConfig, RegimeMonitor, label_of, regime_start, regime_step
+from ident.live.regimes import (LABELS, Decision, RegimeConfig, RegimeMonitor, decide, label_of, regime_start,
+                                regime_step)
 from ident.live.scoring import score_regimes, true_changes
 
 FS = 2000.0
@@ -207,6 +208,60 @@ def test_any_split_into_blocks_gives_the_same_output(generated):
         pos += k
     assert repr(parts) == repr(whole) and repr(ch_parts) == repr(ch_whole)  # repr: exact floats, NaN equal
     assert state2.n_seen == state.n_seen == len(x)
+
+
+def decided(probabilities, cfg=RegimeConfig()):
+    """The decision stage alone on a synthetic sequence of the beams' probabilities of hitting: every
+    window's reported label and the indices of the windows that report a change."""
+    d, labels, changes = Decision(), [], []
+    for k, p in enumerate(probabilities):
+        d, changed = decide(d, p, cfg)
+        labels.append(d.label)
+        if changed:
+            changes.append(k)
+    return labels, changes
+
+
+FREE, HIT, GRAZE = 0.1, 0.9, 0.6  # clear free, clear hitting, inside the hysteresis band [0.3, 0.7]
+
+
+@pytest.mark.parametrize("dwell", [1, 2, 3, 5])
+def test_a_sustained_change_is_reported_after_exactly_the_dwell(dwell):
+    cfg = RegimeConfig(dwell=dwell)
+    labels, changes = decided([(FREE, FREE)] * 10 + [(HIT, FREE)] * 10, cfg)
+    assert labels[0] == "linear" and changes == [10 + dwell - 1]
+    assert labels[:10 + dwell - 1] == ["linear"] * (10 + dwell - 1)
+    assert labels[10 + dwell - 1:] == ["localized-1"] * (10 - dwell + 1)
+
+
+def test_flicker_shorter_than_the_dwell_is_no_change():
+    cfg = RegimeConfig(dwell=3)
+    # clear flicker: the other regime for 1 and 2 windows at a time (< 3), ten times over
+    seq = [(FREE, FREE)] * 4 + ([(HIT, FREE)] + [(FREE, FREE)] * 2 + [(FREE, HIT)] * 2 + [(FREE, FREE)]) * 10
+    labels, changes = decided(seq, cfg)
+    assert changes == [] and set(labels) == {"linear"}
+    # the starting regime is the first window's, whatever it is
+    labels, changes = decided([(HIT, HIT)] + [(HIT, FREE), (HIT, HIT)] * 5, RegimeConfig(dwell=2))
+    assert changes == [] and set(labels) == {"impacting-both"}
+
+
+def test_windows_inside_the_hysteresis_band_neither_count_nor_break_the_dwell():
+    cfg = RegimeConfig(dwell=2, max_dwell=8, hysteresis=0.2)
+    start = [(HIT, FREE)] * 4  # localized-1
+    # beam 2 crosses 0.7 once, then stays in the band (hitting by hysteresis, unclear) for 5 windows, then
+    # leaves: the label impacting-both for 6 windows, but only 1 clear one: no change (the plain two-window
+    # dwell reported it, and its return, as two changes)
+    labels, changes = decided(start + [(HIT, 0.75)] + [(HIT, GRAZE)] * 5 + [(HIT, FREE)] * 4, cfg)
+    assert changes == [] and set(labels) == {"localized-1"}
+    # unclear windows in between do not break the run: the second clear window reports the change
+    labels, changes = decided(start + [(HIT, 0.75)] + [(HIT, GRAZE)] * 3 + [(HIT, HIT)] * 3, cfg)
+    assert changes == [4 + 4] and labels[8] == "impacting-both"
+    # a regime that stays unclear is reported after max_dwell windows of it
+    labels, changes = decided(start + [(HIT, 0.75)] + [(HIT, GRAZE)] * 10, cfg)
+    assert changes == [4 + 8 - 1] and labels[-1] == "impacting-both"
+    # without hysteresis every window is clear: the plain dwell
+    labels, changes = decided(start + [(HIT, 0.75)] + [(HIT, GRAZE)] * 3, RegimeConfig(dwell=2, hysteresis=0.0))
+    assert changes == [4 + 1]
 
 
 def test_true_changes_ignore_flicker():

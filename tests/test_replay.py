@@ -220,6 +220,24 @@ def test_bad_files_are_one_line_exit_2(tmp_path):
         assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, (args, p.stderr)
 
 
+def test_record_no_identify_still_monitors_regimes(tmp_path):
+    """--no-identify leaves out the rolling SINDy only (its help: "filters and regimes only"): the regime
+    monitor runs and its events reach the recording and --events; no model is written."""
+    cfg = tmp_path / "kick.yaml"
+    cfg.write_text("excitation:\n  ramp_s: 1.0\n  kicks:\n    - {t_s: 3.0285, beam: 2, velocity_m_per_s: 0.3}\n")
+    out, ev = tmp_path / "plain.mcap", tmp_path / "plain.jsonl"
+    p = cli("daq", "record", "--sim", "--config", str(cfg), "--duration", "8", "-o", str(out), "--events", str(ev),
+            "--quiet", "--no-identify")
+    assert p.returncode == 0, p.stderr
+    rec = read_recording(out, raw=False)
+    assert [e["regime"] for e in rec.events if e["kind"] == "regime"] == ["localized-2"]
+    assert rec.models == [] and not any(e["kind"] == "model" for e in rec.events)
+    lines = [json.loads(x) for x in ev.read_text().splitlines()]
+    assert [e["regime"] for e in lines if e["kind"] == "regime"] == ["localized-2"]
+    assert {"start", "stop"} <= {e["kind"] for e in lines}  # the acquisition's events as before
+    assert "1 regime changes" in p.stdout and "no identification" in p.stdout, p.stdout
+
+
 def test_live_record_writes_regime_events_to_mcap_and_jsonl(tmp_path):
     cfg = tmp_path / "kick.yaml"
     cfg.write_text("excitation:\n  ramp_s: 1.0\n  kicks:\n    - {t_s: 3.0285, beam: 2, velocity_m_per_s: 0.3}\n")
