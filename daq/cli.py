@@ -335,6 +335,8 @@ class LiveProcessing:
             if e["kind"] == "regime":
                 self.regimes.append(e["regime"])
             msg = (f"regime {e['regime']} (was {e['previous']})" if e["kind"] == "regime"
+                   else f"starting regime {e['regime']} (confidence {e['confidence']:.2f})"
+                   if e["kind"] == "regime_start"
                    else f"beam {e.get('beam')} model changed: " + "; ".join(e.get("equations", [])))
             data = {k: v for k, v in e.items() if k not in ("t", "kind")}
             self.outq.put(Event(e["t"], e["kind"], msg, "info", data))
@@ -350,7 +352,7 @@ class LiveProcessing:
                 log_ns = rec.log_time_ns(t) if t is not None else None
                 for m in item[2]:
                     rec.write_model(m, log_ns=log_ns)
-            elif item.kind in ("regime", "model"):
+            elif item.kind in ("regime_start", "regime", "model"):
                 t = self.timeline_s(item.t)
                 rec.write_event(item, log_ns=rec.log_time_ns(t) if t is not None else None)
             else:

@@ -153,8 +153,9 @@ def play_cmd(args) -> int:
             counts[e["kind"]] += 1
             if events:
                 events.write(e)
-            if e["kind"] == "regime":
-                print(f"{e['t']:9.2f} s  regime {e['regime']}", flush=True)
+            if e["kind"] in ("regime_start", "regime"):
+                start = " (start)" if e["kind"] == "regime_start" else ""
+                print(f"{e['t']:9.2f} s  regime {e['regime']}{start}", flush=True)
 
     try:
         compile_s = 0.0 if args.no_identify else compile_kernels()  # before the clock starts: no window waits

@@ -5,13 +5,15 @@ unfiltered samples (n, 3: base, tip1, tip2 in m/s^2) from any source and
 returns what the sinks need: the causal 50 Hz low-pass of every channel (the
 raw block is kept beside it, since impacts live above 50 Hz), relative
 motions (tip minus base, filtered), the regime monitor's windows and changes,
-the rolling identification's fits, and the events (``kind`` "regime" or
-"model"). Times are seconds since the start of the stream, counted in samples.
+the rolling identification's fits, and the events (``kind`` "regime_start"
+once, at the first window: the regime the stream starts in, with its
+confidence; then "regime" at each change and "model"). Times are seconds
+since the start of the stream, counted in samples.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -114,8 +116,6 @@ def parse_gaps(text: str | None) -> tuple[float, float] | None:
 class Pipeline:
     def __init__(self, cfg: PipelineConfig = PipelineConfig()):
         if cfg.regime.fs_hz != cfg.fs_hz or cfg.rolling.fs_hz != cfg.fs_hz:
-            from dataclasses import replace
-
             cfg = replace(cfg, regime=replace(cfg.regime, fs_hz=cfg.fs_hz),
                           rolling=replace(cfg.rolling, fs_hz=cfg.fs_hz))
         self.cfg = cfg
@@ -123,6 +123,7 @@ class Pipeline:
         self.monitor = RegimeMonitor(cfg.regime)
         self.rolling = RollingIdentifier(cfg.rolling) if cfg.identify else None
         self.n_seen = 0
+        self._started = False
 
     def step(self, block: np.ndarray) -> StepOutput:
         x = np.asarray(block, float)
@@ -145,8 +146,14 @@ class Pipeline:
         return self._output(np.zeros(0), e, e, np.zeros((0, 2)), [], [], fits)
 
     def _output(self, t, x, y, rel, windows, changes, fits) -> StepOutput:
-        events = [{"t": c.t_s, "kind": "regime", "regime": c.regime, "previous": c.previous,
-                   "confidence": c.confidence} for c in changes]
+        events = []
+        if windows and not self._started:
+            self._started = True
+            w = windows[0]
+            events.append({"t": w.t_s, "kind": "regime_start", "regime": w.label,
+                           "confidence": w.confidence})
+        events += [{"t": c.t_s, "kind": "regime", "regime": c.regime, "previous": c.previous,
+                    "confidence": c.confidence} for c in changes]
         for f in fits:
             for i, b in enumerate(f.beams):
                 if b.changed:
