@@ -14,7 +14,7 @@ import pytest
 from daq.sim.independent.cases import discovery_case
 from ident.cli.bench_discovery import independent_case
 from ident.discovery.baselines.modal import ModalBaseline, admissible
-from ident.discovery.discover import BLOCK_PERIODS, _fit_modal, _split
+from ident.discovery.discover import _fit_modal, _split
 from ident.discovery.signals import prepare
 
 
@@ -30,16 +30,17 @@ def test_admissible_poles_are_stable_and_below_nyquist():
 
 
 def test_a_strongly_impacting_record_gets_a_stable_baseline_with_the_free_beams_mode():
-    c = independent_case(0)
+    generated = discovery_case(0)
+    c = independent_case(0, generated)
     assert (c.family, c.cause, c.measurement.fs_hz) == ("rig_voltage", "contact", 500.0)
     band, poles0 = _fit_modal(c.measurement, None, None, None)
     prep = prepare(c.measurement, band)
-    split = _split(prep, None, None, BLOCK_PERIODS * 0.4 / prep.band[0])
+    split = _split(prep)
     b = ModalBaseline.fit(prep, split.rows("train"), poles0=poles0)
     assert admissible(b.model.poles, prep)
     assert np.all(b.model.frequencies_hz < 0.49 * prep.fs_hz)
     # the generator's linear modes: the second (17.35 Hz) is the beam without the stopper
-    free_beam = discovery_case(0).truth["structure"]["system_modes_hz"][1]
+    free_beam = generated.truth["structure"]["system_modes_hz"][1]
     assert np.min(np.abs(b.model.frequencies_hz / free_beam - 1)) < 0.02
     assert b.fit_nrmse < 1.0 and np.isfinite(b.fit_nrmse)
     assert pytest.approx(free_beam, rel=0.01) == 17.35

@@ -120,8 +120,10 @@ def run_case(args: tuple[str, int, float]) -> Verdict:
     return judge(case, d, time.perf_counter() - t0)
 
 
-def independent_case(seed: int) -> Case:
-    c = discovery_case(seed)
+def independent_case(seed: int, generated=None) -> Case:
+    """The generator's case ``seed`` as a measurement and its truth (``generated``: that case, if already
+    drawn)."""
+    c = generated or discovery_case(seed)
     t = c.truth
     col, kind = t["excitation"].split(":")
     responses = tuple(Channel(n, k, np.asarray(c.columns[n], float)) for n, k in (r.split(":") for r in t["responses"]))

@@ -45,7 +45,7 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
     """Band from a first fit on the preliminary band, then the baseline fitted again in the modes' band."""
     src = fit_data or m
     prep0 = prepare(src)
-    split0 = _split(prep0, None if fit_data else train, None if fit_data else test, BLOCK_PERIODS * 0.4 / prep0.band[0])
+    split0 = _split(prep0, None if fit_data else train, None if fit_data else test)
     rows0 = np.arange(prep0.edge, prep0.n - prep0.edge) if fit_data else split0.rows("train")
     first = ModalBaseline.fit(prep0, rows0)
     f = first.model.frequencies_hz
@@ -57,12 +57,15 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
     return modal_band(first.model.frequencies_hz[light], m.fs_hz, min(m.n, src.n)), first.model.poles[light]
 
 
-def _split(prep: Prepared, train: slice | None, test: slice | None, block_s: float) -> Split:
+def _split(prep: Prepared, train: slice | None = None, test: slice | None = None) -> Split:
+    """The given train and test ranges, else interleaved blocks of ``BLOCK_PERIODS`` periods of the
+    slowest mode (the band's low edge is 0.4 x its frequency)."""
     if train is not None or test is not None:
         n = prep.n
         tr = train or slice(0, int(0.6 * n))
         te = test or slice(tr.stop, n)
         return given(n, prep.edge, tr, te)
+    block_s = BLOCK_PERIODS * 0.4 / float(prep.band[0])
     return interleaved(prep.n, prep.edge, max(int(block_s * prep.fs_hz), 16))
 
 
@@ -90,7 +93,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         band, poles0 = _fit_modal(m, fit_data, train, test)
         prep = prepare(m, band)
     f_min = float(prep.band[0]) / 0.4
-    split = _split(prep, train, test, BLOCK_PERIODS / f_min)
+    split = _split(prep, train, test)
     if rig is None:
         if fit_data is not None:
             prep_fit = prepare(fit_data, band)
@@ -216,7 +219,7 @@ def _hold_at_fit_level(cands: list[Candidate], baseline: Baseline, prep_fit: Pre
     the baseline predicts significantly better on that record's held-out blocks is not significant: an
     amplitude-dependent cause explains the high level without breaking the low one, an
     equivalent-linear change does not."""
-    split_f = _split(prep_fit, None, None, 4.0 / f_min)
+    split_f = _split(prep_fit)
     scale_f = np.maximum(prep_fit.measured[split_f.rows("test")].std(axis=0), 1e-300)
     piece = max(16, int(PIECE_PERIODS * prep_fit.fs_hz / f_min))
     e0f, _ = block_errors(baseline, baseline.model, prep_fit, split_f.test, warm, scale_f, (), np.inf, piece)

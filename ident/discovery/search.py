@@ -397,10 +397,10 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
     to this record is first refitted jointly with it (``joint_refit``, if ``joint``); a baseline fitted
     to a separate record (``fit``: its preparation and segments, a low level) is refitted there with the
     candidate in place, before and after the refinement (the cause acts at the low level too: the linear
-    part fitted there without it holds the cause's equivalent stiffness and damping twice); then its coefficients are scaled (log, within
-    a factor e^2, e^5 for a stopper's or a joint's stiffness); a contact's side, gap and stiffness are
-    scanned first (a stiff stopper's error is a narrow valley in the gap), a joint's slip displacement
-    is scaled too."""
+    part fitted there without it holds the cause's equivalent stiffness and damping twice); then its
+    coefficients are scaled (log, within a factor e^2, e^5 for a stopper's or a joint's stiffness); a
+    contact's side, gap and stiffness are scanned first (a stiff stopper's error is a narrow valley in
+    the gap), a joint's slip displacement is scaled too."""
     if not c.elements:
         return c
     base0 = baseline
