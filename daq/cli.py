@@ -253,13 +253,12 @@ class LiveProcessing:
     def __init__(self, fs_hz: float, viewer_mode: str, rrd_path: Path | None, events_path: Path | None,
                  window_s: float = 4.0, hop_s: float = 1.0, bind: str = DEFAULT_BIND, *, force: bool = False,
                  inputs=(), identify: bool = True, gaps: tuple[float, float] | None = None,
-                 compile_s: float | None = None):
+                 compile_s: float = 0.0):
         self.identify = identify  # False: filters and the regime monitor only (no rolling SINDy)
         self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, identify=identify,
                                             rolling=rolling_config(fs_hz, window_s, hop_s),
                                             regime=RegimeConfig(fs_hz=fs_hz, gap_m=gaps)))
-        # the kernels compiled before the first sample (``compile_s``: the caller already did, so long)
-        self.compile_s = compile_s if compile_s is not None else (compile_kernels() if identify else 0.0)
+        self.compile_s = compile_s  # how long the caller compiled the kernels before the first sample
         self.fs_hz = fs_hz
         self.jsonl = JsonlEvents(events_path, force=force, inputs=inputs) if events_path else None
         try:
@@ -304,7 +303,7 @@ class LiveProcessing:
         while True:
             item = self.inq.get()
             if item is None:
-                self._handle(self.pipe.finish())  # the last window's refined fit
+                self._handle(self.pipe.finish)  # the last window's refined fit
                 return
             arrived, values = item
             t0 = time.monotonic()
@@ -318,9 +317,9 @@ class LiveProcessing:
                 self.latencies.append(done - arrived)
 
     def _handle(self, step, *args):
-        """Run a pipeline step (or take its output), show it, queue its models and events for the recorder."""
+        """Run a pipeline step, show it, queue its models and events for the recorder."""
         try:
-            out = step(*args) if args else step
+            out = step(*args)
             self.viewer.log_step(out)
         except Exception as exc:  # noqa: BLE001 - processing must never stop the recording
             if self.error is None:

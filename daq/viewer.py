@@ -440,8 +440,9 @@ class RerunViewer:
                 if new.any():
                     self._scalars(f"{pre}/z", f.t[new], 1e3 * f.measured[new, i, 0])
                     self._scalars(f"{pre}/z_pred", f.t[new], 1e3 * f.predicted[new, i, 0])
-            self._backbone(f)
-            self._restoring(f)
+            if f.final:  # one backbone point and restoring-force curve per window: its refined model's
+                self._backbone(f)
+                self._restoring(f)
             if f.final and len(f.t):
                 self._sent_t = float(f.t[-1])
         for e in out.events:

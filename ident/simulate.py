@@ -13,6 +13,7 @@ Accuracy: on the paper's Duffing case (dt = 0.01) this matches a solve_ivp
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -126,8 +127,6 @@ def _rk4_parallel(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound
 def kernels_cached() -> bool | None:
     """Whether numba's disk cache holds the integration kernels (so they load in milliseconds instead of
     compiling for seconds); None where this numba keeps its cache elsewhere."""
-    import os
-
     try:
         return all(os.path.exists(k._cache._cache_file._index_path) for k in (_rk4_serial, _rk4_parallel))
     except AttributeError:

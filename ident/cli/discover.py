@@ -230,13 +230,14 @@ def _time_and_spectrum(d: Discovery, path: Path) -> None:
     fig.legend(handles, labels, loc="upper right", ncol=len(labels), fontsize=8)  # above the panels, on no data
     tests = list(d.split.test)
     resid = [prep.measured[s] - predict(d.baseline, d.baseline.model, prep, s, d.warm) for s in tests]
+    # Welch within each held-out block, averaged over the blocks: no segment spans two blocks
+    shortest = min(s.stop - s.start for s in tests)
+    nper = min(shortest, int(2 ** np.floor(np.log2(max(64, prep.fs_hz / prep.band[0] * 8)))))
     for i in range(k):
         ax = axes[i, -1]
-        # Welch within each held-out block, averaged over the blocks: no segment spans two blocks
-        shortest = min(s.stop - s.start for s in tests)
-        nper = min(shortest, int(2 ** np.floor(np.log2(max(64, prep.fs_hz / prep.band[0] * 8)))))
-        f = welch(prep.measured[tests[0], i], prep.fs_hz, nperseg=nper)[0]
-        p = np.mean([welch(prep.measured[s, i], prep.fs_hz, nperseg=nper)[1] for s in tests], axis=0)
+        spectra = [welch(prep.measured[s, i], prep.fs_hz, nperseg=nper) for s in tests]
+        f = spectra[0][0]
+        p = np.mean([sp[1] for sp in spectra], axis=0)
         pr = np.mean([welch(r[:, i], prep.fs_hz, nperseg=nper)[1] for r in resid], axis=0)
         ax.semilogy(f, p, "k", lw=1, label="measured")
         ax.semilogy(f, pr, "tab:red", lw=0.8, label="baseline residual")
