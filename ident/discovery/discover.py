@@ -20,7 +20,7 @@ from threadpoolctl import threadpool_limits
 
 from ..rig import RigParams
 from .baselines import Baseline
-from .baselines.modal import ModalBaseline
+from .baselines.modal import ModalBaseline, structural
 from .baselines.rig import RigBaseline
 from .characterise import characterise
 from .result import Discovery
@@ -42,15 +42,19 @@ def _warm(baseline: Baseline, prep: Prepared) -> int:
 
 
 def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None, test: slice | None):
-    """Band from a first fit on the preliminary band, then the baseline fitted again in the modes' band."""
+    """Band from a first fit on the preliminary band, then the baseline fitted again in the modes' band.
+
+    The first fit chooses its order on every third training block (of the whole record with ``fit_data``),
+    left out of the fit; a single training slice (``--train``) leaves the choice to the fit error."""
     src = fit_data or m
     prep0 = prepare(src)
     split0 = _split(prep0, None if fit_data else train, None if fit_data else test)
-    rows0 = np.arange(prep0.edge, prep0.n - prep0.edge) if fit_data else split0.rows("train")
-    first = ModalBaseline.fit(prep0, rows0)
-    f = first.model.frequencies_hz
-    # structural modes: lightly damped, inside the band the data carry power in
-    light = (first.model.damping_ratios < 0.3) & (f >= prep0.band[0]) & (f <= prep0.band[1])
+    segs = split0.blocks if fit_data else split0.train
+    check = segs[2::3] if len(segs) >= 3 else ()
+    rows0 = np.concatenate([np.arange(s.start, s.stop) for s in segs if s not in check])
+    first = ModalBaseline.fit(prep0, rows0,
+                              check=np.concatenate([np.arange(s.start, s.stop) for s in check]) if check else None)
+    light = structural(first.model.poles, prep0)
     if not np.any(light):
         raise ValueError("no lightly damped mode in the data: nothing resonates in the band "
                          f"{prep0.band[0]:.3g}-{prep0.band[1]:.3g} Hz")
@@ -144,7 +148,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
                 continue
             try:
                 c = regress(baseline, prep, train_rows, residual, loc, cause, scale)
-            except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+            except NUMERIC_FAILURES as exc:
                 notes.append(f"{cause} at {loc.name}: regression failed ({exc})")
                 continue
             if c is not None:
@@ -159,7 +163,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
             loc = next(loc for loc in ranked if loc.name == cands[i].location)
             try:
                 again = regress(baseline, prep, train_rows, residual, loc, cands[i].cause, scale, joint_shapes=3)
-            except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+            except NUMERIC_FAILURES as exc:
                 notes.append(f"{cands[i].label}: joint fit failed ({exc})")
                 continue
             if again is not None:
@@ -184,7 +188,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         try:
             refined.append(refine(c, baseline, by_loc[c.location], prep, split, warm, scale, bound, settings,
                                   joint=joint, fit=fit_record))
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+        except NUMERIC_FAILURES as exc:
             notes.append(f"{c.label}: refinement failed ({exc})")
     scored = [score(c, baseline, prep, split, sc) for c in cands + refined]
     scored.sort(key=lambda c: -c.gain if np.isfinite(c.gain) else np.inf)

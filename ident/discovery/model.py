@@ -28,6 +28,9 @@ from numba import njit
 from .catalogue import N_IWAN, law, slide, slope
 
 KINDS = ("displacement", "velocity", "acceleration")
+# what a fit or a simulation raises when the numbers fail (a singular system, a pole that underflowed to
+# zero inside a compiled kernel, an optimiser given non-finite values): a failed candidate, never a crash
+NUMERIC_FAILURES = (np.linalg.LinAlgError, ValueError, FloatingPointError, ZeroDivisionError)
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ from scipy.stats import t as student_t
 
 from .baselines import Baseline, Location
 from .catalogue import CAUSES, CONTACT, JOINT, SIDES, force_series, law_parameters, shapes
-from .model import Element, LinearModel, force_response, lstsq, nudging_gain, simulate, substeps_for
+from .model import NUMERIC_FAILURES, Element, LinearModel, force_response, lstsq, nudging_gain, simulate, substeps_for
 from .signals import ORDER, Prepared, convert
 from .split import Split
 
@@ -171,7 +171,7 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
     model = own.model.with_elements(c.elements)
     try:
         errs, nrmse = block_errors(own, model, prep, split.test, sc.warm, sc.scale, c.output, sc.bound, sc.piece)
-    except (np.linalg.LinAlgError, ValueError, FloatingPointError, ZeroDivisionError) as exc:
+    except NUMERIC_FAILURES as exc:
         return replace(c, block_errors=np.full(sc.block_errors.size, np.inf), test_nrmse=np.inf, gain=-np.inf,
                        p_value=1.0, note=f"failed: {exc}")
     gain = 1.0 - nrmse / sc.test_nrmse if np.isfinite(nrmse) and sc.test_nrmse > 0 else -np.inf
@@ -251,7 +251,7 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
     for r2, shp, cols, _, _ in found[:joint_shapes]:
         try:
             own, jg, err = baseline.fit_jointly(prep, rows, loc, [cols[:, c] for c in range(cols.shape[1])])
-        except (np.linalg.LinAlgError, ValueError):
+        except NUMERIC_FAILURES:
             continue
         lz2 = loc.lz(own.model)
         els = tuple(Element(cause.code, law_parameters(cause, shp, c), lz2, g, loc.weights)
@@ -351,7 +351,7 @@ def _train_error(baseline: Baseline, c: Candidate, prep: Prepared, segs, warm: i
     own = c.baseline or baseline
     try:
         _, e = block_errors(own, own.model.with_elements(c.elements), prep, segs, warm, scale, c.output, bound)
-    except (np.linalg.LinAlgError, ValueError, FloatingPointError, ZeroDivisionError):
+    except NUMERIC_FAILURES:
         return np.inf
     return e
 
@@ -464,7 +464,7 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
             res = minimize(lambda x: min(err(x)[0], PENALTY), x0, method="Nelder-Mead",
                            options={"maxfev": settings.refine_evals // len(starts), "xatol": 1e-3,
                                     "fatol": 1e-5, "initial_simplex": simplex})
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+        except NUMERIC_FAILURES as exc:
             return replace(c, note=f"refinement failed: {exc}")
         e, cand = err(res.x)
         if cand is not None and e < best[0]:

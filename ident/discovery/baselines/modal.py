@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..model import Element, LinearModel, lstsq, mode_states
+from ..model import NUMERIC_FAILURES, Element, LinearModel, lstsq, mode_states
 from ..signals import ORDER, Prepared, convert, frf
 from . import Baseline, Location, dominant_mode, element_force
 
@@ -59,22 +59,26 @@ def _inputs(poles, prep: Prepared, elements: tuple[Element, ...], forces) -> tup
 
 
 def fit_residues(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements: tuple[Element, ...] = (),
-                 forces=()) -> tuple[np.ndarray, np.ndarray]:
+                 forces=(), at: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Residues C (k, m) for fixed poles by least squares on the measured responses over ``rows``, and the
-    fitted outputs there (len(rows), k). ``forces``: element forces along the record (measured
-    coordinates)."""
+    fitted outputs there (len(rows), k); with ``at``, the outputs at those rows instead, from the measured
+    input alone (the forced response: the free response of the record's initial state fitted on ``rows``
+    is left out, see ``fit_model``). ``forces``: element forces along the record (measured coordinates)."""
     states, drive = _inputs(poles, prep, elements, forces)
-    states, drive = states[rows], drive[rows]
-    t = rows / prep.fs_hz
     m = poles.size
     C = np.empty((len(prep.names), m), complex)
-    fit = np.empty((rows.size, len(prep.names)))
+    fit = np.empty((rows.size if at is None else at.size, len(prep.names)))
     for i, kind in enumerate(prep.kinds):
-        X = _design(poles, states, drive, t, ORDER[kind])
-        y = prep.measured[rows, i] - (prep.base[rows, ORDER[kind]] if prep.base_excited else 0.0)
+        o = ORDER[kind]
+        X = _design(poles, states[rows], drive[rows], rows / prep.fs_hz, o)
+        y = prep.measured[rows, i] - (prep.base[rows, o] if prep.base_excited else 0.0)
         sol = lstsq(X, y)
         C[i] = sol[:m] + 1j * sol[m:2 * m]
-        fit[:, i] = X @ sol + (prep.base[rows, ORDER[kind]] if prep.base_excited else 0.0)
+        if at is None:
+            fit[:, i] = X @ sol + (prep.base[rows, o] if prep.base_excited else 0.0)
+        else:
+            forced = _design(poles, states[at], drive[at], at / prep.fs_hz, o)[:, :2 * m]
+            fit[:, i] = forced @ sol[:2 * m] + (prep.base[at, o] if prep.base_excited else 0.0)
     return C, fit
 
 
@@ -89,8 +93,15 @@ def _nrmse(fit: np.ndarray, meas: np.ndarray) -> float:
 def admissible(poles: np.ndarray, prep: Prepared) -> bool:
     """Poles a refinement may return: stable, and every natural frequency below Nyquist (an unbounded
     search once sent a mode to 1e12 Hz with no damping, and every simulation of the baseline diverged)."""
-    return bool(np.all(np.isfinite(poles)) and np.all(poles.real < 0)
+    return bool(np.all(np.isfinite(poles)) and np.all(poles.real < 0) and np.all(poles.imag > 0)
                 and np.all(np.abs(poles) < 2 * np.pi * 0.49 * prep.fs_hz))
+
+
+def structural(poles: np.ndarray, prep: Prepared) -> np.ndarray:
+    """Which poles are structural modes: lightly damped (zeta < 0.3), inside the band the data carry
+    power in."""
+    f = np.abs(poles) / (2 * np.pi)
+    return (-poles.real / np.maximum(np.abs(poles), 1e-300) < 0.3) & (f >= prep.band[0]) & (f <= prep.band[1])
 
 
 def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(), forces=(),
@@ -115,7 +126,7 @@ def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(
     x0 = np.concatenate([np.log(np.maximum(-poles.real, 1e-6)), np.log(poles.imag)])
     try:
         x = least_squares(resid, x0, max_nfev=max_nfev, x_scale=0.01, diff_step=1e-5).x
-    except (np.linalg.LinAlgError, ValueError):
+    except NUMERIC_FAILURES:
         return poles
     return unpack(x) if admissible(unpack(x), prep) else poles
 
@@ -168,13 +179,13 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
             return np.full(sub.size * scale.size, 1e3)
         try:
             return ((solve(unpack(x), sub)[2] - prep.measured[sub]) / scale).ravel()
-        except ValueError:
+        except NUMERIC_FAILURES:
             return np.full(sub.size * scale.size, 1e3)
 
     x0 = np.concatenate([np.log(np.maximum(-poles0.real, 1e-6)), np.log(poles0.imag)])
     try:
         poles = unpack(least_squares(resid, x0, max_nfev=max_nfev, x_scale=0.01, diff_step=1e-5).x)
-    except (np.linalg.LinAlgError, ValueError):
+    except NUMERIC_FAILURES:
         poles = np.asarray(poles0, complex)
     if not admissible(poles, prep):
         poles = np.asarray(poles0, complex)
@@ -239,10 +250,18 @@ def stride(prep: Prepared, rows: np.ndarray, cap: int = 20000) -> int:
 
 
 def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
-              poles0: np.ndarray | None = None) -> tuple[LinearModel, float]:
-    """The modal model of the lowest order after which two more modes no longer cut the fit error of any
-    response on ``rows`` by 10 % (and 0.005); returns it with its error (NRMSE, mean over responses). With ``poles0``
-    (a fit of the same data in another band) the order is taken from it and only refined."""
+              poles0: np.ndarray | None = None, check: np.ndarray | None = None) -> tuple[LinearModel, float]:
+    """The modal model of the lowest order after which two more modes no longer cut the error of any
+    response by 10 % (and 0.005); returns it with its fit error on ``rows`` (NRMSE, mean over responses).
+
+    The error that chooses the order is, when ``check`` is given, the model's on those rows (which the
+    fit did not see) from the measured input alone, else its fit error on ``rows``. On a nonlinear record
+    every extra mode cuts the fit error: a pole with next to no damping lets its free response run through
+    the whole record as one more sinusoid, which on a periodic or stepped excitation fits the steady
+    response of a nonlinear structure at that line (independent Duffing seed 23: seven modes, four of
+    them undamped, where the generator has one; held-out NRMSE 0.41 against a fit error of 0.03). What
+    the input alone makes on rows the fit did not see is what such modes cannot fake. With ``poles0`` (a
+    fit of the same data in another band) the order is taken from it and only refined."""
     st = stride(prep, rows)
     if poles0 is not None:
         poles = refine_poles(np.asarray(poles0, complex), prep, rows, max_nfev=30, stride=st)
@@ -260,12 +279,14 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
         try:
             poles = vector_fit_poles(f, H, m)
             poles = refine_poles(poles, prep, rows, max_nfev=12, stride=2 * st)
-            C, fit = fit_residues(poles, prep, rows)
-        except (np.linalg.LinAlgError, ValueError):
+            C, fit = fit_residues(poles, prep, rows, at=check)
+        except NUMERIC_FAILURES:
             break
-        each = _per_response(fit, prep.measured[rows])
-        # more modes are kept when they fit any response better: a sensor on a beam whose mode the others
-        # barely see must get its mode too
+        if not np.any(structural(poles, prep)):  # nothing resonates: no order to choose
+            continue
+        each = _per_response(fit, prep.measured[rows if check is None else check])
+        # more modes are kept when they predict any response better: a sensor on a beam whose mode the
+        # others barely see must get its mode too
         if kept is None or np.any((each < 0.9 * kept[0]) & (kept[0] - each > 0.005)):
             kept, misses = (each, poles, C), 0
         else:
@@ -275,7 +296,8 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
     if kept is None:
         raise ValueError("no modal model could be fitted to the data")
     err, poles, C = kept
-    poles = refine_poles(poles, prep, rows, max_nfev=30, stride=st)
+    refined = refine_poles(poles, prep, rows, max_nfev=30, stride=st)
+    poles = refined if np.any(structural(refined, prep)) else poles
     C, fit = fit_residues(poles, prep, rows)
     m = poles.size
     return LinearModel(poles, np.ones((1, m), complex), C), _nrmse(fit, prep.measured[rows])
@@ -297,8 +319,8 @@ class ModalBaseline(Baseline):
 
     @classmethod
     def fit(cls, prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
-            poles0: np.ndarray | None = None) -> "ModalBaseline":
-        model, err = fit_model(prep, rows, max_modes, poles0)
+            poles0: np.ndarray | None = None, check: np.ndarray | None = None) -> "ModalBaseline":
+        model, err = fit_model(prep, rows, max_modes, poles0, check)
         return cls(model, prep.driving_point if prep.excitation_kind == "force" else None,
                    prep.excitation_kind == "voltage", err)
 
@@ -370,7 +392,7 @@ class ModalBaseline(Baseline):
             poles = refine_poles(self.model.poles, prep, rows, elements, forces, max_nfev=10,
                                  stride=2 * stride(prep, rows))
             C, fit = fit_residues(poles, prep, rows, elements, forces)
-        except (np.linalg.LinAlgError, ValueError):
+        except NUMERIC_FAILURES:
             return self
         m = poles.size
         return ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point,
