@@ -7,22 +7,12 @@ the ``.part`` with every line written so far (each line is flushed).
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Iterable
 from pathlib import Path
 
+from ident.jsonsafe import finite
+
 from .safeio import PartFile
-
-
-def _clean(v):
-    """NaN and inf as null (JSON has neither), inside lists and dicts too."""
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    return v
 
 
 class JsonlEvents:
@@ -32,7 +22,7 @@ class JsonlEvents:
         self._fh = self._out.file
 
     def write(self, event: dict) -> None:
-        self._fh.write(json.dumps({k: _clean(v) for k, v in event.items()}, default=str) + "\n")
+        self._fh.write(json.dumps(finite(event), default=str) + "\n")
         self._fh.flush()
 
     def close(self) -> Path:

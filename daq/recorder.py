@@ -60,6 +60,8 @@ from mcap.data_stream import RecordBuilder
 from mcap.records import Channel, Schema
 from mcap.writer import CompressionType, Writer
 
+from ident.jsonsafe import finite
+
 from .config import Config
 from .driver import Event, SampleBlock
 from .protocol import Status
@@ -221,7 +223,7 @@ class McapRecorder:
         log = ns if log_ns is None else log_ns  # the data time an event describes, where it has one
         msg = {"timestamp": {"sec": log // 10**9, "nsec": log % 10**9}, "level": LEVELS.get(e.level, 2),
                "message": e.message, "name": "daq", "file": "", "line": 0, "t": e.t, "kind": e.kind, **e.data}
-        self._add("events", log, ns, json.dumps(msg).encode())
+        self._add("events", log, ns, json.dumps(finite(msg)).encode())
 
     def log_time_ns(self, t_s: float) -> int | None:
         """The log time of a sample at this place on the timeline (``SampleBlock.t_s``; None before the first
@@ -232,8 +234,7 @@ class McapRecorder:
         """One rolling-window model of one beam (the identification's time series), logged at the data
         time of the window (log_ns) and published now."""
         ns = time.time_ns()
-        clean = json.loads(json.dumps(record), parse_constant=lambda c: None)  # NaN and inf as null
-        self._add("model", ns if log_ns is None else log_ns, ns, json.dumps(clean).encode())
+        self._add("model", ns if log_ns is None else log_ns, ns, json.dumps(finite(record)).encode())
 
     def write_status(self, status: dict) -> None:
         ns = time.time_ns()

@@ -42,6 +42,7 @@ from tqdm import tqdm
 from daq.safeio import Output, check_outputs, safe_folder, safe_output, same_file
 from replay.formats import FORMATS, format_of, mcap, read_samples
 
+from ..jsonsafe import finite
 from ..campaign import fit_beams, regime_durations, regime_spans
 from ..discovery import Channel, Measurement, discover
 from ..discovery.result import candidate_json
@@ -113,22 +114,8 @@ class Settings:
         return _json(sig)
 
 
-def _clean(v):
-    """JSON-ready: numpy scalars to Python, non-finite floats to None."""
-    if isinstance(v, (float, np.floating)):
-        v = float(v)
-        return v if math.isfinite(v) else None
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, dict):
-        return {str(k): _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    return v
-
-
 def _json(v) -> str:
-    return json.dumps(_clean(v), separators=(",", ":"))
+    return json.dumps(finite(v), separators=(",", ":"))
 
 
 def identity(path: str) -> dict:

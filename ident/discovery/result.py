@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..jsonsafe import finite
 from .baselines import Baseline
 from .catalogue import CAUSES
 from .model import LinearModel
@@ -60,19 +60,6 @@ class Discovery:
         return "; ".join(parts)
 
 
-def _clean(v):
-    if isinstance(v, (float, np.floating)):
-        v = float(v)
-        return v if math.isfinite(v) else None
-    if isinstance(v, (np.integer,)):
-        return int(v)
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    return v
-
-
 def equation(c: Candidate) -> str:
     text = ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in c.parameters.items())
     return f"{c.location}: {c.cause} ({text})"
@@ -81,7 +68,7 @@ def equation(c: Candidate) -> str:
 def candidate_json(c: Candidate, fs_hz: float | None = None) -> dict:
     cause = CAUSES[c.cause]
     units = {p.name: p.unit for p in cause.coefficients + cause.shape}
-    return _clean({"effect": c.cause, "response": c.location, "parameters": c.parameters, "units": units,
+    return finite({"effect": c.cause, "response": c.location, "parameters": c.parameters, "units": units,
                    "physical": c.physical, "gain": c.gain, "test_nrmse": c.test_nrmse, "p_value": c.p_value,
                    "fit_r2": c.fit_r2, "refined": c.refined, "note": c.note or None})
 
@@ -114,4 +101,4 @@ def to_json(d: Discovery) -> dict:
         "characterisation": d.characterisation,
         "notes": d.notes,
     }
-    return _clean(out)
+    return finite(out)
