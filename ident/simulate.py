@@ -49,29 +49,56 @@ def _chain(library: PolynomialForcingLibrary) -> tuple[np.ndarray, np.ndarray]:
     return parent, var
 
 
-@njit(cache=True, nogil=True)
-def _rhs(c, parent, var, k_poly, forcing, x, f, theta, out):  # pragma: no cover - compiled
+@njit(cache=True, nogil=True, inline="always")
+def _rhs(terms, values, starts, parent, var, k_top, forcing_at, x, f, theta, out):  # pragma: no cover - compiled
+    """out = Theta(x, f) Xi with Xi given by its non-zero entries (see ``_sparse``): the monomials up to the
+    highest one the model uses, then per equation the sum over its terms in term order. Inlined into the
+    RK4 loop: called (four times a step, passing seven arrays each time) it made the integration 2.5 times slower."""
     theta[0] = 1.0
-    for k in range(1, k_poly):
+    for k in range(1, k_top):
         theta[k] = theta[parent[k]] * x[var[k]]
-    if forcing:
-        theta[k_poly] = f
-    n = x.shape[0]
-    for i in range(n):
+    if forcing_at >= 0:
+        theta[forcing_at] = f
+    for i in range(out.shape[0]):
         acc = 0.0
-        for k in range(c.shape[0]):
-            ck = c[k, i]
-            if ck != 0.0:
-                acc += ck * theta[k]
+        for j in range(starts[i], starts[i + 1]):
+            acc += values[j] * theta[terms[j]]
         out[i] = acc
+
+
+@njit(cache=True, nogil=True)
+def _sparse(c, k_poly):  # pragma: no cover - compiled
+    """A model's non-zero coefficients per equation, in term order: (terms, values, starts, k_top), equation i
+    holding entries starts[i] .. starts[i + 1]; k_top is one past the highest monomial used.
+
+    Summing only these in term order adds the same products in the same order as the dense sum that skips
+    zeros, so the result is bit for bit the same; a rig model holds 5-8 of the 22 entries, and skipping the
+    rest makes the integration a quarter faster."""
+    kk, n = c.shape
+    terms = np.empty(kk * n, np.int64)
+    values = np.empty(kk * n)
+    starts = np.zeros(n + 1, np.int64)
+    j = 0
+    k_top = 1
+    for i in range(n):
+        for k in range(kk):
+            if c[k, i] != 0.0:
+                terms[j] = k
+                values[j] = c[k, i]
+                j += 1
+                if k < k_poly:
+                    k_top = max(k_top, k + 1)
+        starts[i + 1] = j
+    return terms, values, starts, k_top
 
 
 @njit(cache=True, nogil=True)
 def _rk4_model(c, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound, out):  # pragma: no cover
     """Integrate one model into ``out`` (n_t, n), pre-filled with NaN; True if it diverged."""
     n = x0.shape[0]
-    kk = c.shape[0]
-    theta = np.empty(kk)
+    terms, values, starts, k_top = _sparse(c, k_poly)
+    forcing_at = k_poly if forcing else -1
+    theta = np.empty(c.shape[0])
     k1 = np.empty(n)
     k2 = np.empty(n)
     k3 = np.empty(n)
@@ -85,16 +112,16 @@ def _rk4_model(c, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound, out):
             f0 = f_stage[i, 2 * s]
             fm = f_stage[i, 2 * s + 1]
             f1 = f_stage[i, 2 * s + 2]
-            _rhs(c, parent, var, k_poly, forcing, x, f0, theta, k1)
+            _rhs(terms, values, starts, parent, var, k_top, forcing_at, x, f0, theta, k1)
             for q in range(n):
                 xs[q] = x[q] + 0.5 * h * k1[q]
-            _rhs(c, parent, var, k_poly, forcing, xs, fm, theta, k2)
+            _rhs(terms, values, starts, parent, var, k_top, forcing_at, xs, fm, theta, k2)
             for q in range(n):
                 xs[q] = x[q] + 0.5 * h * k2[q]
-            _rhs(c, parent, var, k_poly, forcing, xs, fm, theta, k3)
+            _rhs(terms, values, starts, parent, var, k_top, forcing_at, xs, fm, theta, k3)
             for q in range(n):
                 xs[q] = x[q] + h * k3[q]
-            _rhs(c, parent, var, k_poly, forcing, xs, f1, theta, k4)
+            _rhs(terms, values, starts, parent, var, k_top, forcing_at, xs, f1, theta, k4)
             for q in range(n):
                 x[q] = x[q] + (h / 6.0) * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
         for q in range(n):
