@@ -191,7 +191,8 @@ def refine(library: PolynomialForcingLibrary, coefs: np.ndarray, x: np.ndarray, 
     With ``fit_initial`` the initial state is optimised too (within half a
     standard deviation of the first sample): a noisy first sample otherwise
     biases the whole trajectory fit. ``gradient``: "central" differences
-    (2p + 1 integrations per gradient) or "forward" (p + 1, for live use).
+    (2p integrations per gradient) or "forward" (p, for live use), beside
+    the one integration per point at which the objective is asked.
     """
     if gradient not in ("central", "forward"):
         raise ValueError(f"unknown gradient scheme {gradient!r}; choose central or forward")
@@ -217,31 +218,38 @@ def refine(library: PolynomialForcingLibrary, coefs: np.ndarray, x: np.ndarray, 
         e[sim.diverged] = np.inf
         return e**2
 
-    cache: dict[bytes, tuple[float, np.ndarray]] = {}
+    # SLSQP asks for the objective at every line-search point and for the gradient only at the accepted
+    # ones (about half as often): the p perturbed integrations run only when a gradient is asked for, and
+    # the objective at a point is integrated once (a gradient reuses it). The numbers are the ones a batch
+    # of the point and its perturbations gives: every model is integrated on its own.
+    errors: dict[bytes, float] = {}  # squared error (inf where diverged) per point
 
-    def fun_and_jac(p: np.ndarray) -> tuple[float, np.ndarray]:
+    def error(p: np.ndarray) -> float:
         key = p.tobytes()
-        if key not in cache:
-            h = 1e-6 * np.maximum(np.abs(p), 1e-3)
+        if key not in errors:
+            errors[key] = float(batch(p[None])[0])
+        return errors[key]
+
+    def fun(p: np.ndarray) -> float:
+        e = error(p)
+        return e if np.isfinite(e) else 1e10
+
+    def jac(p: np.ndarray) -> np.ndarray:
+        h = 1e-6 * np.maximum(np.abs(p), 1e-3)
+        with np.errstate(invalid="ignore"):  # inf - inf where a perturbation diverged
             if gradient == "central":
-                e = batch(np.vstack([p, p + np.diag(h), p - np.diag(h)]))
-                with np.errstate(invalid="ignore"):  # inf - inf where a perturbation diverged
-                    g = (e[1 : p.size + 1] - e[p.size + 1 :]) / (2 * h)
+                e = batch(np.vstack([p + np.diag(h), p - np.diag(h)]))
+                g = (e[:p.size] - e[p.size:]) / (2 * h)
             else:
-                e = batch(np.vstack([p, p + np.diag(h)]))
-                with np.errstate(invalid="ignore"):
-                    g = (e[1:] - e[0]) / h
-            cache.clear()
-            cache[key] = (float(e[0]) if np.isfinite(e[0]) else 1e10, np.where(np.isfinite(g), g, 0.0))
-        return cache[key]
+                g = (batch(p + np.diag(h)) - error(p)) / h
+        return np.where(np.isfinite(g), g, 0.0)
 
     widths = np.concatenate([rel_bound * np.abs(p0[:n_c]), 0.5 * x.std(axis=0)[:n_x]])
-    res = minimize(lambda p: fun_and_jac(p)[0], p0, jac=lambda p: fun_and_jac(p)[1],
-                   method="SLSQP", bounds=list(zip(p0 - widths, p0 + widths)),
+    res = minimize(fun, p0, jac=jac, method="SLSQP", bounds=list(zip(p0 - widths, p0 + widths)),
                    options={"maxiter": maxiter, "ftol": 1e-12})
-    e0 = fun_and_jac(p0)[0]
-    p = res.x if fun_and_jac(res.x)[0] <= e0 else p0
-    e1 = fun_and_jac(p)[0]
+    e0 = fun(p0)
+    p = res.x if fun(res.x) <= e0 else p0
+    e1 = fun(p)
     out = coefs.copy()
     out[active] = p[:n_c]
     return Refinement(float(np.sqrt(e0)), float(np.sqrt(e1)), out, int(res.nit), bool(res.success),
