@@ -151,11 +151,15 @@ def _rk4_parallel(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound
     return out, diverged
 
 
-def kernels_cached() -> bool | None:
-    """Whether numba's disk cache holds the integration kernels (so they load in milliseconds instead of
-    compiling for seconds); None where this numba keeps its cache elsewhere."""
+KERNELS = (_rk4_serial, _rk4_parallel)  # the compiled integration kernels (see kernels_cached)
+
+
+def kernels_cached(kernels=KERNELS) -> bool | None:
+    """Whether numba's disk cache holds the given compiled kernels (default: the integration kernels), so
+    they load in milliseconds instead of compiling for seconds; None where this numba keeps its cache
+    elsewhere."""
     try:
-        return all(os.path.exists(k._cache._cache_file._index_path) for k in (_rk4_serial, _rk4_parallel))
+        return all(os.path.exists(k._cache._cache_file._index_path) for k in kernels)
     except AttributeError:
         return None
 
