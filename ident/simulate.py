@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numba import njit, prange
@@ -35,8 +36,12 @@ class Simulation:
     diverged: np.ndarray
 
 
+@lru_cache(maxsize=16)
 def _chain(library: PolynomialForcingLibrary) -> tuple[np.ndarray, np.ndarray]:
-    """Each monomial k > 0 as (parent monomial, state): theta[k] = theta[parent] * x[state]."""
+    """Each monomial k > 0 as (parent monomial, state): theta[k] = theta[parent] * x[state].
+
+    Cached per library (a frozen value): an SQP refinement integrates a few hundred times, and building
+    this took as long as integrating a rig model over a window."""
     index = {tuple(p): k for k, p in enumerate(library.powers)}
     k_poly = library.powers.shape[0]
     parent = np.zeros(k_poly, dtype=np.int64)
