@@ -106,15 +106,21 @@ def stlsq(theta: np.ndarray, dxdt: np.ndarray, threshold: float, max_iter: int =
     for libraries whose columns are nearly collinear (single-tone steady states).
     """
     xi = _lstsq(theta, dxdt, ridge) if initial is None else np.array(initial, float)
+    return _stlsq(xi, threshold, max_iter, lambda big, i: _lstsq(theta[:, big], dxdt[:, i], ridge))
+
+
+def _stlsq(xi: np.ndarray, threshold: float, max_iter: int, solve) -> np.ndarray:
+    """STLSQ's iterations from the coefficients ``xi`` (changed in place); ``solve(big, i)`` is the least-squares
+    fit of equation i on the terms where ``big`` is true (the sweep memoises it across thresholds)."""
     for _ in range(max_iter):
         small = np.abs(xi) < threshold
         xi[small] = 0.0
         changed = False
-        for i in range(dxdt.shape[1]):
+        for i in range(xi.shape[1]):
             big = ~small[:, i]
             if not big.any():
                 continue
-            new = _lstsq(theta[:, big], dxdt[:, i], ridge)
+            new = solve(big, i)
             if np.any(np.abs(new) < threshold):
                 changed = True
             xi[big, i] = new
@@ -162,9 +168,20 @@ def sweep(library: PolynomialForcingLibrary, x: np.ndarray, dxdt: np.ndarray, t:
     lambdas = np.concatenate([[0.0], 0.5 * (mags[:-1] + mags[1:]), [mags[-1] * 1.01 if mags.size else 1.0]])
     if lambdas.size > max_candidates:
         lambdas = np.quantile(lambdas, np.linspace(0, 1, max_candidates))
+    # Every threshold's STLSQ starts from xi0 and refits subsets of terms; different thresholds refit the
+    # same subsets again and again (a rolling window's sweep asked for about 100 fits, 30 of them distinct), so each
+    # subset is fitted once. The same numbers as a plain stlsq per threshold.
+    fits: dict[tuple[int, bytes], np.ndarray] = {}
+
+    def solve(big: np.ndarray, i: int) -> np.ndarray:
+        key = (i, big.tobytes())
+        if key not in fits:
+            fits[key] = _lstsq(theta_n[:, big], dxdt[:, i], ridge)
+        return fits[key]
+
     cands: dict[bytes, tuple[float, np.ndarray]] = {}
     for lam in lambdas:
-        xi = stlsq(theta_n, dxdt, lam, ridge=ridge) / scale[:, None]
+        xi = _stlsq(xi0.copy(), lam, 20, solve) / scale[:, None]
         key = (xi != 0).tobytes()
         cands.setdefault(key, (float(lam), xi))
     lams = np.array([v[0] for v in cands.values()])
