@@ -98,7 +98,7 @@ def _batched_stlsq(a: np.ndarray, c: np.ndarray, threshold: np.ndarray, max_iter
     # a tiny ridge against exactly collinear columns (a single tone makes z, v and F nearly so)
     a = a + 1e-12 * np.trace(a, axis1=1, axis2=2)[:, None, None] * np.eye(k)
     xi, singular = _stlsq_normal(np.ascontiguousarray(a), np.ascontiguousarray(c),
-                                 np.ascontiguousarray(threshold, dtype=float), int(max_iter))
+                                 np.array(threshold, dtype=float), int(max_iter))  # writable: one compiled signature
     if singular:
         raise np.linalg.LinAlgError("singular normal equations in the ensemble: a library column is all zero")
     return xi

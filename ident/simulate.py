@@ -156,7 +156,97 @@ def _rk4_parallel(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound
     return out, diverged
 
 
-KERNELS = (_rk4_serial, _rk4_parallel)  # the compiled integration kernels (see kernels_cached)
+@njit(cache=True, nogil=True, inline="always")
+def _rhs_lockstep(terms, values, starts, parent, var, k_top, forcing_at, x, f, theta, out):  # pragma: no cover
+    """``_rhs`` for a batch of models with one sparsity pattern, the models along the last axis (x, out (n, B),
+    values (nnz, B)): each model's products and sums in the same order as ``_rhs``, so the same numbers."""
+    b = x.shape[1]
+    for j in range(b):
+        theta[0, j] = 1.0
+    for k in range(1, k_top):
+        pk = parent[k]
+        vk = var[k]
+        for j in range(b):
+            theta[k, j] = theta[pk, j] * x[vk, j]
+    if forcing_at >= 0:
+        for j in range(b):
+            theta[forcing_at, j] = f
+    for i in range(out.shape[0]):
+        for j in range(b):
+            out[i, j] = 0.0
+        for e in range(starts[i], starts[i + 1]):
+            k = terms[e]
+            for j in range(b):
+                out[i, j] += values[e, j] * theta[k, j]
+
+
+@njit(cache=True, nogil=True)
+def _rk4_lockstep(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound):  # pragma: no cover
+    """``_rk4_serial`` for a batch whose models share one sparsity pattern (an SQP refinement's gradient:
+    every model perturbs one coefficient or initial state of the same model), integrated side by side so
+    that each operation runs over the whole batch (vectorised) instead of one model at a time. A model
+    that diverges keeps being stepped (its values are no longer used): its rows after divergence stay
+    NaN, as in ``_rk4_model``."""
+    b, kk, n = coefs.shape
+    terms, _, starts, k_top = _sparse(coefs[0], k_poly)
+    nnz = starts[n]
+    values = np.empty((nnz, b))
+    for j in range(b):
+        values[:, j] = _sparse(coefs[j], k_poly)[1][:nnz]
+    forcing_at = k_poly if forcing else -1
+    out = np.full((b, dt.shape[0] + 1, n), np.nan)
+    diverged = np.zeros(b, dtype=np.bool_)
+    theta = np.empty((kk, b))
+    k1 = np.empty((n, b))
+    k2 = np.empty((n, b))
+    k3 = np.empty((n, b))
+    k4 = np.empty((n, b))
+    xs = np.empty((n, b))
+    x = np.empty((n, b))
+    for j in range(b):
+        for q in range(n):
+            x[q, j] = x0[j, q]
+            out[j, 0, q] = x0[j, q]
+    alive = b
+    for i in range(dt.shape[0]):
+        h = dt[i] / m
+        for s in range(m):
+            f0 = f_stage[i, 2 * s]
+            fm = f_stage[i, 2 * s + 1]
+            f1 = f_stage[i, 2 * s + 2]
+            _rhs_lockstep(terms, values, starts, parent, var, k_top, forcing_at, x, f0, theta, k1)
+            for q in range(n):
+                for j in range(b):
+                    xs[q, j] = x[q, j] + 0.5 * h * k1[q, j]
+            _rhs_lockstep(terms, values, starts, parent, var, k_top, forcing_at, xs, fm, theta, k2)
+            for q in range(n):
+                for j in range(b):
+                    xs[q, j] = x[q, j] + 0.5 * h * k2[q, j]
+            _rhs_lockstep(terms, values, starts, parent, var, k_top, forcing_at, xs, fm, theta, k3)
+            for q in range(n):
+                for j in range(b):
+                    xs[q, j] = x[q, j] + h * k3[q, j]
+            _rhs_lockstep(terms, values, starts, parent, var, k_top, forcing_at, xs, f1, theta, k4)
+            for q in range(n):
+                for j in range(b):
+                    x[q, j] = x[q, j] + (h / 6.0) * (k1[q, j] + 2.0 * k2[q, j] + 2.0 * k3[q, j] + k4[q, j])
+        for j in range(b):
+            if diverged[j]:
+                continue
+            for q in range(n):
+                if not (abs(x[q, j]) <= bound):  # also catches NaN
+                    diverged[j] = True
+                    alive -= 1
+                    break
+            if not diverged[j]:
+                for q in range(n):
+                    out[j, i + 1, q] = x[q, j]
+        if alive == 0:
+            break
+    return out, diverged
+
+
+KERNELS = (_rk4_serial, _rk4_parallel, _rk4_lockstep)  # the compiled integration kernels (see kernels_cached)
 
 
 def kernels_cached(kernels=KERNELS) -> bool | None:
@@ -230,7 +320,9 @@ def simulate(
     dt = np.diff(t)
     if not np.all(dt > 0):
         raise ValueError("t must be strictly increasing")
-    x0 = np.broadcast_to(np.asarray(x0, dtype=float), (b, n))
+    # a writable copy: numba compiles a kernel apart for a read-only array (as a broadcast view is), and a
+    # kernel compiled in the middle of a stream (the first refinement's) stalls it for seconds
+    x0 = np.array(np.broadcast_to(np.asarray(x0, dtype=float), (b, n)), order="C")
     if not np.all(np.isfinite(x0)):
         raise ValueError("initial state contains NaN or inf")
     m = int(substeps)
@@ -249,9 +341,14 @@ def simulate(
         f_stage = np.zeros((n_t - 1, 2 * m + 1))
 
     parent, var = _chain(library)
-    kernel = _rk4_parallel if b * (n_t - 1) * m >= PARALLEL_MIN_WORK else _rk4_serial
-    res, diverged = kernel(np.ascontiguousarray(coefs), parent, var, library.powers.shape[0],
-                           library.forcing, np.ascontiguousarray(x0), dt,
+    if b * (n_t - 1) * m >= PARALLEL_MIN_WORK:
+        kernel = _rk4_parallel
+    elif b > 1 and np.array_equal(np.broadcast_to(coefs[:1] != 0, coefs.shape), coefs != 0):
+        kernel = _rk4_lockstep  # one sparsity pattern: the models side by side (the same numbers)
+    else:
+        kernel = _rk4_serial
+    coefs = np.require(coefs, requirements=("C", "W"))  # writable, as x0: one compiled signature per kernel
+    res, diverged = kernel(coefs, parent, var, library.powers.shape[0], library.forcing, x0, dt,
                            np.ascontiguousarray(f_stage), m, float(bound))
     if single:
         return Simulation(res[0], diverged[:1])

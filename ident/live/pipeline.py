@@ -94,7 +94,7 @@ def kernels_cached() -> bool | None:
 
 
 def warm_up() -> None:
-    """Compile the numba kernels the rolling identification uses (RK4 integration, serial and parallel;
+    """Compile the numba kernels the rolling identification uses (RK4 integration: serial, lockstep, parallel;
     the ensemble's STLSQ), on tiny inputs: numba caches the machine code on disk, so only the first run
     after an install pays (seconds); callers run this before data flows so that no window waits for the
     compiler."""
@@ -104,6 +104,7 @@ def warm_up() -> None:
     coefs[lib.names.index("z"), 1] = -1.0
     t = np.linspace(0.0, 1.0, 64)
     simulate(lib, coefs, np.zeros(2), t, np.zeros_like(t))
+    simulate(lib, np.stack([coefs, 2 * coefs]), np.zeros(2), t, np.zeros_like(t))  # one pattern: lockstep
     n_batch = PARALLEL_MIN_WORK // (len(t) - 1) + 1
     simulate(lib, np.repeat(coefs[None], n_batch, axis=0), np.zeros(2), t, np.zeros_like(t))
     block_bootstrap(np.eye(4), np.ones((4, 2)), 0.5, n_models=2, n_blocks=2)
