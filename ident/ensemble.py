@@ -39,14 +39,20 @@ def block_counts(n_models: int, n_blocks: int, rng: np.random.Generator) -> np.n
     return (draws[:, :, None] == np.arange(n_blocks)).sum(axis=1).astype(float)
 
 
+def column_rms(theta: np.ndarray) -> np.ndarray:
+    """(K,) the RMS of each library column over the rows: the scale on which thresholds are set (a
+    coefficient times its column's RMS is its term's contribution)."""
+    return np.sqrt(np.mean(np.asarray(theta, float) ** 2, axis=0))
+
+
 def block_bootstrap(theta: np.ndarray, dxdt: np.ndarray, threshold: float | np.ndarray, *, n_models: int = 32,
                     n_blocks: int = 8, rng: np.random.Generator | None = None, max_iter: int = 20,
-                    counts: np.ndarray | None = None) -> Ensemble:
+                    counts: np.ndarray | None = None, rms: np.ndarray | None = None) -> Ensemble:
     """STLSQ at ``threshold`` (unit-RMS columns, as the sweep's thresholds; one per equation if an array)
     on block-bootstrap resamples.
 
     theta: (N, K) library on the window's rows; dxdt: (N, n) derivatives. ``counts`` (B, n_blocks)
-    fixes the resamples (else drawn from ``rng``).
+    fixes the resamples (else drawn from ``rng``). ``rms``: ``column_rms(theta)`` where the caller has it.
     """
     theta = np.asarray(theta, float)
     dxdt = np.asarray(dxdt, float)
@@ -57,7 +63,7 @@ def block_bootstrap(theta: np.ndarray, dxdt: np.ndarray, threshold: float | np.n
         raise ValueError(f"theta has {n} rows, derivatives {dxdt.shape[0]}")
     if n < 2 * n_blocks:
         raise ValueError(f"{n} rows are too few for {n_blocks} blocks")
-    scale = np.sqrt(np.mean(theta**2, axis=0))
+    scale = np.array(column_rms(theta) if rms is None else rms, float)
     scale[scale == 0] = 1.0
     tn = theta / scale
     edges = np.linspace(0, n, n_blocks + 1).astype(int)
@@ -73,11 +79,12 @@ def block_bootstrap(theta: np.ndarray, dxdt: np.ndarray, threshold: float | np.n
     return Ensemble(coefs.mean(axis=0), coefs.std(axis=0), (coefs != 0).mean(axis=0), coefs)
 
 
-def model_thresholds(theta: np.ndarray, coefficients: np.ndarray, fallback: float = 0.0) -> np.ndarray:
+def model_thresholds(theta: np.ndarray, coefficients: np.ndarray, fallback: float = 0.0, *,
+                     rms: np.ndarray | None = None) -> np.ndarray:
     """Per equation, half the smallest active coefficient on unit-RMS columns: the threshold at which the
     ensemble asks whether each of the model's terms survives resampling (``fallback`` for an empty
-    equation)."""
-    scale = np.sqrt(np.mean(np.asarray(theta, float) ** 2, axis=0))
+    equation). ``rms``: ``column_rms(theta)`` where the caller has it."""
+    scale = column_rms(theta) if rms is None else rms
     mags = np.abs(np.asarray(coefficients, float)) * scale[:, None]
     out = np.full(mags.shape[1], float(fallback))
     for e in range(mags.shape[1]):

@@ -105,6 +105,10 @@ def test_uncertainty_and_backbone(linear_rig_fits):
             sl = slice(int(round((fit.t[0]) * fs)), int(round(fit.t[-1] * fs)) + 1)
             zb = sosfiltfilt(design_highpass(fs, 2.0, 2), z_true[:, i])[sl]
             assert b.amplitude_m == pytest.approx(np.sqrt(2) * np.sqrt(np.mean(zb**2)), rel=0.03)
+            # the terms' RMS over the window: the constant 1, z's is the amplitude's over sqrt 2, F's the base's
+            assert b.term_rms[names.index("1")] == 1.0
+            assert b.term_rms[names.index("z")] == pytest.approx(b.amplitude_m / np.sqrt(2), rel=1e-12)
+            assert b.term_rms[names.index("F")] == pytest.approx(np.sqrt(np.mean(fit.base**2)), rel=1e-12)
 
 
 def test_warm_up_compiles_the_kernels_the_fits_run(linear_rig_fits):

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..ensemble import block_bootstrap, model_thresholds
+from ..ensemble import block_bootstrap, column_rms, model_thresholds
 from ..filters import lowpass_zero_phase
 from ..library import PolynomialForcingLibrary
 from ..model import SindyModel
@@ -84,6 +84,7 @@ class BeamFit:
     natural_frequency_std_hz: float  # spread of the natural frequency over the ensemble
     amplitude_m: float  # sqrt(2) RMS of the relative displacement z over the window (the backbone's abscissa)
     threshold: float  # the STLSQ threshold (unit-RMS columns) the model's active set came from
+    term_rms: np.ndarray  # (K,) RMS of each library term over the window (a term's size is coefficient x this)
 
 
 @dataclass(frozen=True)
@@ -275,13 +276,14 @@ class RollingIdentifier:
         act = _active(model)
         changed = prev is not None and act != _active(prev)
         theta = self.lib.transform(xs, base)
+        rms = column_rms(theta)
         rng = np.random.default_rng((index, stage))  # the window's index: the same resamples for any block split
-        ens = block_bootstrap(theta, dx, model_thresholds(theta, coefs, lam), n_models=cfg.ensemble_models,
-                              n_blocks=cfg.ensemble_blocks, rng=rng)
+        ens = block_bootstrap(theta, dx, model_thresholds(theta, coefs, lam, rms=rms), n_models=cfg.ensemble_models,
+                              n_blocks=cfg.ensemble_blocks, rng=rng, rms=rms)
         k_m = -ens.coefficients[:, iz, 1]
         fn_m = np.sqrt(k_m[k_m > 0]) / (2 * np.pi)
         fn_std = float(fn_m.std()) if fn_m.size > 1 else float("nan")
         amp = float(np.sqrt(2.0) * np.sqrt(np.mean(xs[:, 0] ** 2)))
         self._prev[i] = model
         self._prev_lam[i] = lam
-        return BeamFit(model, err, float(k), fn, act, changed, ens.std, ens.inclusion, fn_std, amp, lam)
+        return BeamFit(model, err, float(k), fn, act, changed, ens.std, ens.inclusion, fn_std, amp, lam, rms)
