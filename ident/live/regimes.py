@@ -318,10 +318,12 @@ def spectral_features(x: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0
         if den < 0:
             delta = 0.5 * (a - c) / den
     f = float((k + delta) * df)
-    e1 = np.exp(-2j * np.pi * f * t)
     n_h = max(1, min(PEAK_HARMONICS, int(0.45 * fs_hz / f))) if f > 0 else 1
-    basis = np.cumprod(np.repeat(e1[:, None], n_h, axis=1), axis=1)  # exp(-2 pi i n f t), n = 1 .. H
-    harmonics = 2 * (basis.T @ xw) / w.sum()
+    basis = np.empty((n_h, n), complex)  # exp(-2 pi i n f t), n = 1 .. H, by products of the fundamental's
+    basis[0] = np.exp(-2j * np.pi * f * t)
+    for h in range(1, n_h):
+        np.multiply(basis[h - 1], basis[0], out=basis[h])
+    harmonics = 2 * (basis @ xw) / w.sum()
     phasors = harmonics[0]
 
     def index(freq_hz: float) -> int:  # first bin at or above freq_hz
