@@ -4,7 +4,8 @@ Classical fixed-step Runge-Kutta 4 on the sampling grid (optionally with
 sub-steps), the forcing between samples taken from a cubic spline through the
 samples. The integrator is a numba-compiled kernel over a batch of coefficient
 matrices, so a sparsification sweep or a finite-difference gradient is one
-call. A model that leaves ``bound`` or goes non-finite is flagged as diverged,
+call; a batch whose models share one sparsity pattern (a gradient's) is
+integrated side by side, vectorised over the models, with the same numbers. A model that leaves ``bound`` or goes non-finite is flagged as diverged,
 its remaining samples are NaN, and nothing is raised.
 
 Accuracy: on the paper's Duffing case (dt = 0.01) this matches a solve_ivp
