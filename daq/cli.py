@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from ident.cli import DURATION, SEED, WINDOW, OneLineParser, number, run_guarded
-from ident.live.pipeline import Pipeline, PipelineConfig, model_records, parse_gaps, rolling_config, warm_up
+from ident.live.pipeline import (Pipeline, PipelineConfig, kernels_cached, model_records, parse_gaps,
+                                 rolling_config, warm_up)
 from ident.live.regimes import RegimeConfig
-from ident.simulate import kernels_cached
 
 from . import bench, calibrate
 from .config import Config, load_config

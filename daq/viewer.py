@@ -450,12 +450,11 @@ class RerunViewer:
 
     def _contributions(self, f, i: int, b) -> tuple[np.ndarray, np.ndarray]:
         """Each v' term's coefficient x RMS(term) / RMS(v') over the window, and the same for its std."""
-        lib, c = b.model.library, b.model.coefficients[:, 1]
+        c = b.model.coefficients[:, 1]
         std = np.nan_to_num(np.asarray(b.coefficient_std)[:, 1]) if b.coefficient_std is not None else 0 * c
         if f.base is None or f.accel is None:
             return c, std
-        theta = lib.transform(f.measured[:, i, :], f.base) if lib.forcing else lib.transform(f.measured[:, i, :])
-        rms_t = np.sqrt(np.mean(theta ** 2, axis=0))
+        rms_t = b.term_rms  # over the window, as the fit's ensemble scaled its columns
         rms_r = max(float(np.sqrt(np.mean(f.accel[:, i] ** 2))), 1e-12)
         return c * rms_t / rms_r, std * rms_t / rms_r
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 
 @dataclass(frozen=True)
@@ -35,17 +36,23 @@ class Ensemble:
 def block_counts(n_models: int, n_blocks: int, rng: np.random.Generator) -> np.ndarray:
     """(n_models, n_blocks) how often each block is drawn: n_blocks draws with replacement per model."""
     draws = rng.integers(0, n_blocks, size=(n_models, n_blocks))
-    return np.stack([np.bincount(d, minlength=n_blocks) for d in draws]).astype(float)
+    return (draws[:, :, None] == np.arange(n_blocks)).sum(axis=1).astype(float)
+
+
+def column_rms(theta: np.ndarray) -> np.ndarray:
+    """(K,) the RMS of each library column over the rows: the scale on which thresholds are set (a
+    coefficient times its column's RMS is its term's contribution)."""
+    return np.sqrt(np.mean(np.asarray(theta, float) ** 2, axis=0))
 
 
 def block_bootstrap(theta: np.ndarray, dxdt: np.ndarray, threshold: float | np.ndarray, *, n_models: int = 32,
                     n_blocks: int = 8, rng: np.random.Generator | None = None, max_iter: int = 20,
-                    counts: np.ndarray | None = None) -> Ensemble:
+                    counts: np.ndarray | None = None, rms: np.ndarray | None = None) -> Ensemble:
     """STLSQ at ``threshold`` (unit-RMS columns, as the sweep's thresholds; one per equation if an array)
     on block-bootstrap resamples.
 
     theta: (N, K) library on the window's rows; dxdt: (N, n) derivatives. ``counts`` (B, n_blocks)
-    fixes the resamples (else drawn from ``rng``).
+    fixes the resamples (else drawn from ``rng``). ``rms``: ``column_rms(theta)`` where the caller has it.
     """
     theta = np.asarray(theta, float)
     dxdt = np.asarray(dxdt, float)
@@ -56,7 +63,7 @@ def block_bootstrap(theta: np.ndarray, dxdt: np.ndarray, threshold: float | np.n
         raise ValueError(f"theta has {n} rows, derivatives {dxdt.shape[0]}")
     if n < 2 * n_blocks:
         raise ValueError(f"{n} rows are too few for {n_blocks} blocks")
-    scale = np.sqrt(np.mean(theta**2, axis=0))
+    scale = np.array(column_rms(theta) if rms is None else rms, float)
     scale[scale == 0] = 1.0
     tn = theta / scale
     edges = np.linspace(0, n, n_blocks + 1).astype(int)
@@ -72,11 +79,12 @@ def block_bootstrap(theta: np.ndarray, dxdt: np.ndarray, threshold: float | np.n
     return Ensemble(coefs.mean(axis=0), coefs.std(axis=0), (coefs != 0).mean(axis=0), coefs)
 
 
-def model_thresholds(theta: np.ndarray, coefficients: np.ndarray, fallback: float = 0.0) -> np.ndarray:
+def model_thresholds(theta: np.ndarray, coefficients: np.ndarray, fallback: float = 0.0, *,
+                     rms: np.ndarray | None = None) -> np.ndarray:
     """Per equation, half the smallest active coefficient on unit-RMS columns: the threshold at which the
     ensemble asks whether each of the model's terms survives resampling (``fallback`` for an empty
-    equation)."""
-    scale = np.sqrt(np.mean(np.asarray(theta, float) ** 2, axis=0))
+    equation). ``rms``: ``column_rms(theta)`` where the caller has it."""
+    scale = column_rms(theta) if rms is None else rms
     mags = np.abs(np.asarray(coefficients, float)) * scale[:, None]
     out = np.full(mags.shape[1], float(fallback))
     for e in range(mags.shape[1]):
@@ -89,25 +97,87 @@ def model_thresholds(theta: np.ndarray, coefficients: np.ndarray, fallback: floa
 def _batched_stlsq(a: np.ndarray, c: np.ndarray, threshold: np.ndarray, max_iter: int) -> np.ndarray:
     """STLSQ on normal equations a xi = c for a batch: a (B, K, K), c (B, K, n) -> xi (B, K, n).
 
-    Every model and equation is one small system; inactive terms are pinned to zero by replacing their
-    rows and columns with the identity, so each iteration is one batched solve.
+    Every model and equation is one small system, solved on its active terms until they stop changing
+    (``_stlsq_normal``, compiled: a rolling window's ensemble is 64 systems of 11 terms, for which numpy's
+    batched solve spent most of its time building masked arrays).
     """
-    bsz, k, n = c.shape
-    eye = np.eye(k)
+    k = a.shape[1]
     # a tiny ridge against exactly collinear columns (a single tone makes z, v and F nearly so)
-    a = a + 1e-12 * np.trace(a, axis1=1, axis2=2)[:, None, None] * eye
-    aa = np.repeat(a[:, None], n, axis=1).reshape(bsz * n, k, k)  # (B n, K, K): model b, equation e
-    cc = np.moveaxis(c, 2, 1).reshape(bsz * n, k)
-    thr = np.tile(np.asarray(threshold, float), bsz)[:, None]
-    active = np.ones((bsz * n, k), bool)
-    xi = np.zeros((bsz * n, k))
-    for _ in range(max_iter):
-        mm = active[:, :, None] & active[:, None, :]
-        sys = np.where(mm, aa, 0.0) + (~active)[:, :, None] * eye
-        xi = np.linalg.solve(sys, np.where(active, cc, 0.0)[:, :, None])[:, :, 0]
-        new = active & (np.abs(xi) >= thr)
-        xi[~new] = 0.0
-        if np.array_equal(new, active):
-            break
-        active = new
-    return np.moveaxis(xi.reshape(bsz, n, k), 1, 2)
+    a = a + 1e-12 * np.trace(a, axis1=1, axis2=2)[:, None, None] * np.eye(k)
+    xi, singular = _stlsq_normal(np.ascontiguousarray(a), np.ascontiguousarray(c),
+                                 np.array(threshold, dtype=float), int(max_iter))  # writable: one compiled signature
+    if singular:
+        raise np.linalg.LinAlgError("singular normal equations in the ensemble: a library column is all zero")
+    return xi
+
+
+@njit(cache=True, nogil=True)
+def _stlsq_normal(a, c, threshold, max_iter):  # pragma: no cover - compiled
+    """(xi (B, K, n), singular) for ``_batched_stlsq``: per model b and equation e, solve the normal
+    equations restricted to the active terms (Gaussian elimination with partial pivoting), drop the terms
+    below threshold[e], repeat until none drops or ``max_iter`` solves."""
+    bsz, k, n = c.shape
+    xi = np.zeros((bsz, k, n))
+    idx = np.empty(k, np.int64)
+    m = np.empty((k, k))
+    r = np.empty(k)
+    active = np.empty(k, np.bool_)
+    for b in range(bsz):
+        for e in range(n):
+            active[:] = True
+            for _ in range(max_iter):
+                na = 0
+                for j in range(k):
+                    if active[j]:
+                        idx[na] = j
+                        na += 1
+                for p in range(na):
+                    r[p] = c[b, idx[p], e]
+                    for q in range(na):
+                        m[p, q] = a[b, idx[p], idx[q]]
+                if not _solve_in_place(m, r, na):
+                    return xi, True
+                dropped = False
+                for j in range(k):
+                    xi[b, j, e] = 0.0
+                for p in range(na):
+                    if abs(r[p]) >= threshold[e]:
+                        xi[b, idx[p], e] = r[p]
+                    else:
+                        active[idx[p]] = False
+                        dropped = True
+                if not dropped:
+                    break
+    return xi, False
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _solve_in_place(m, r, na):  # pragma: no cover - compiled
+    """Solve m[:na, :na] x = r[:na] into r by Gaussian elimination with partial pivoting (as LAPACK's
+    gesv); False if a pivot is exactly zero."""
+    for col in range(na):
+        piv = col
+        for row in range(col + 1, na):
+            if abs(m[row, col]) > abs(m[piv, col]):
+                piv = row
+        if m[piv, col] == 0.0:
+            return False
+        if piv != col:
+            for q in range(col, na):
+                m[col, q], m[piv, q] = m[piv, q], m[col, q]
+            r[col], r[piv] = r[piv], r[col]
+        for row in range(col + 1, na):
+            f = m[row, col] / m[col, col]
+            if f != 0.0:
+                for q in range(col + 1, na):
+                    m[row, q] -= f * m[col, q]
+                r[row] -= f * r[col]
+    for row in range(na - 1, -1, -1):
+        acc = r[row]
+        for q in range(row + 1, na):
+            acc -= m[row, q] * r[q]
+        r[row] = acc / m[row, row]
+    return True
+
+
+KERNELS = (_stlsq_normal,)  # the compiled kernels (ident.simulate.kernels_cached)

@@ -106,15 +106,21 @@ def stlsq(theta: np.ndarray, dxdt: np.ndarray, threshold: float, max_iter: int =
     for libraries whose columns are nearly collinear (single-tone steady states).
     """
     xi = _lstsq(theta, dxdt, ridge) if initial is None else np.array(initial, float)
+    return _stlsq(xi, threshold, max_iter, lambda big, i: _lstsq(theta[:, big], dxdt[:, i], ridge))
+
+
+def _stlsq(xi: np.ndarray, threshold: float, max_iter: int, solve) -> np.ndarray:
+    """STLSQ's iterations from the coefficients ``xi`` (changed in place); ``solve(big, i)`` is the least-squares
+    fit of equation i on the terms where ``big`` is true (the sweep memoises it across thresholds)."""
     for _ in range(max_iter):
         small = np.abs(xi) < threshold
         xi[small] = 0.0
         changed = False
-        for i in range(dxdt.shape[1]):
+        for i in range(xi.shape[1]):
             big = ~small[:, i]
             if not big.any():
                 continue
-            new = _lstsq(theta[:, big], dxdt[:, i], ridge)
+            new = solve(big, i)
             if np.any(np.abs(new) < threshold):
                 changed = True
             xi[big, i] = new
@@ -124,11 +130,19 @@ def stlsq(theta: np.ndarray, dxdt: np.ndarray, threshold: float, max_iter: int =
     return xi
 
 
-def integration_errors(sim_x: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """NRMSE of each simulated trajectory (B, N, n) against measured states (N, n); inf if NaN."""
-    scale = x.std(axis=0)
-    rms = np.sqrt(np.mean((sim_x - x[None]) ** 2, axis=1))  # (B, n)
-    err = np.mean(rms / scale, axis=1)
+def integration_errors(sim_x: np.ndarray, x: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
+    """NRMSE of each simulated trajectory (B, N, n) against measured states (N, n); inf if NaN.
+
+    ``scale``: the states' standard deviations, x.std(axis=0), where the caller has them (an SQP
+    refinement asks for the errors of hundreds of trajectories against the same x). The means are the
+    sums over the count, as np.mean computes them, without its per-call overhead: this runs as often as
+    the integrator and took longer than integrating one model.
+    """
+    if scale is None:
+        scale = x.std(axis=0)
+    d = sim_x - x[None]
+    rms = np.sqrt(np.add.reduce(d * d, axis=1) / x.shape[0])  # (B, n)
+    err = np.add.reduce(rms / scale, axis=1) / x.shape[1]
     err[~np.isfinite(err)] = np.inf
     return err
 
@@ -154,9 +168,20 @@ def sweep(library: PolynomialForcingLibrary, x: np.ndarray, dxdt: np.ndarray, t:
     lambdas = np.concatenate([[0.0], 0.5 * (mags[:-1] + mags[1:]), [mags[-1] * 1.01 if mags.size else 1.0]])
     if lambdas.size > max_candidates:
         lambdas = np.quantile(lambdas, np.linspace(0, 1, max_candidates))
+    # Every threshold's STLSQ starts from xi0 and refits subsets of terms; different thresholds refit the
+    # same subsets again and again (a rolling window's sweep asked for about 100 fits, 30 of them distinct), so each
+    # subset is fitted once. The same numbers as a plain stlsq per threshold.
+    fits: dict[tuple[int, bytes], np.ndarray] = {}
+
+    def solve(big: np.ndarray, i: int) -> np.ndarray:
+        key = (i, big.tobytes())
+        if key not in fits:
+            fits[key] = _lstsq(theta_n[:, big], dxdt[:, i], ridge)
+        return fits[key]
+
     cands: dict[bytes, tuple[float, np.ndarray]] = {}
     for lam in lambdas:
-        xi = stlsq(theta_n, dxdt, lam, ridge=ridge) / scale[:, None]
+        xi = _stlsq(xi0.copy(), lam, 20, solve) / scale[:, None]
         key = (xi != 0).tobytes()
         cands.setdefault(key, (float(lam), xi))
     lams = np.array([v[0] for v in cands.values()])
@@ -191,7 +216,8 @@ def refine(library: PolynomialForcingLibrary, coefs: np.ndarray, x: np.ndarray, 
     With ``fit_initial`` the initial state is optimised too (within half a
     standard deviation of the first sample): a noisy first sample otherwise
     biases the whole trajectory fit. ``gradient``: "central" differences
-    (2p + 1 integrations per gradient) or "forward" (p + 1, for live use).
+    (2p integrations per gradient) or "forward" (p, for live use), beside
+    the one integration per point at which the objective is asked.
     """
     if gradient not in ("central", "forward"):
         raise ValueError(f"unknown gradient scheme {gradient!r}; choose central or forward")
@@ -206,6 +232,7 @@ def refine(library: PolynomialForcingLibrary, coefs: np.ndarray, x: np.ndarray, 
     n_x = x.shape[1] if fit_initial else 0
     p0 = np.concatenate([coefs[active], x0[:n_x]])
     bound = bound_factor * float(np.max(np.abs(x)))
+    scale = x.std(axis=0)
 
     def batch(ps: np.ndarray) -> np.ndarray:
         cs = np.repeat(coefs[None], ps.shape[0], axis=0)
@@ -213,35 +240,42 @@ def refine(library: PolynomialForcingLibrary, coefs: np.ndarray, x: np.ndarray, 
         starts = np.repeat(x0[None], ps.shape[0], axis=0)
         starts[:, :n_x] = ps[:, n_c:]
         sim = simulate(library, cs, starts, t, forcing, bound=bound)
-        e = integration_errors(sim.x, x)
+        e = integration_errors(sim.x, x, scale)
         e[sim.diverged] = np.inf
         return e**2
 
-    cache: dict[bytes, tuple[float, np.ndarray]] = {}
+    # SLSQP asks for the objective at every line-search point and for the gradient only at the accepted
+    # ones (about half as often): the p perturbed integrations run only when a gradient is asked for, and
+    # the objective at a point is integrated once (a gradient reuses it). The numbers are the ones a batch
+    # of the point and its perturbations gives: every model is integrated on its own.
+    errors: dict[bytes, float] = {}  # squared error (inf where diverged) per point
 
-    def fun_and_jac(p: np.ndarray) -> tuple[float, np.ndarray]:
+    def error(p: np.ndarray) -> float:
         key = p.tobytes()
-        if key not in cache:
-            h = 1e-6 * np.maximum(np.abs(p), 1e-3)
+        if key not in errors:
+            errors[key] = float(batch(p[None])[0])
+        return errors[key]
+
+    def fun(p: np.ndarray) -> float:
+        e = error(p)
+        return e if np.isfinite(e) else 1e10
+
+    def jac(p: np.ndarray) -> np.ndarray:
+        h = 1e-6 * np.maximum(np.abs(p), 1e-3)
+        with np.errstate(invalid="ignore"):  # inf - inf where a perturbation diverged
             if gradient == "central":
-                e = batch(np.vstack([p, p + np.diag(h), p - np.diag(h)]))
-                with np.errstate(invalid="ignore"):  # inf - inf where a perturbation diverged
-                    g = (e[1 : p.size + 1] - e[p.size + 1 :]) / (2 * h)
+                e = batch(np.vstack([p + np.diag(h), p - np.diag(h)]))
+                g = (e[:p.size] - e[p.size:]) / (2 * h)
             else:
-                e = batch(np.vstack([p, p + np.diag(h)]))
-                with np.errstate(invalid="ignore"):
-                    g = (e[1:] - e[0]) / h
-            cache.clear()
-            cache[key] = (float(e[0]) if np.isfinite(e[0]) else 1e10, np.where(np.isfinite(g), g, 0.0))
-        return cache[key]
+                g = (batch(p + np.diag(h)) - error(p)) / h
+        return np.where(np.isfinite(g), g, 0.0)
 
     widths = np.concatenate([rel_bound * np.abs(p0[:n_c]), 0.5 * x.std(axis=0)[:n_x]])
-    res = minimize(lambda p: fun_and_jac(p)[0], p0, jac=lambda p: fun_and_jac(p)[1],
-                   method="SLSQP", bounds=list(zip(p0 - widths, p0 + widths)),
+    res = minimize(fun, p0, jac=jac, method="SLSQP", bounds=list(zip(p0 - widths, p0 + widths)),
                    options={"maxiter": maxiter, "ftol": 1e-12})
-    e0 = fun_and_jac(p0)[0]
-    p = res.x if fun_and_jac(res.x)[0] <= e0 else p0
-    e1 = fun_and_jac(p)[0]
+    e0 = fun(p0)
+    p = res.x if fun(res.x) <= e0 else p0
+    e1 = fun(p)
     out = coefs.copy()
     out[active] = p[:n_c]
     return Refinement(float(np.sqrt(e0)), float(np.sqrt(e1)), out, int(res.nit), bool(res.success),

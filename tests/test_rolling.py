@@ -12,7 +12,10 @@ from ident.filters import design_highpass
 from ident.physical import integrate_band
 from daq.sim.rig import RigConfig, simulate_rig
 from ident.rig import RigParams
+from ident.ensemble import KERNELS as ENSEMBLE_KERNELS
+from ident.live.pipeline import warm_up
 from ident.live.rolling import RollingConfig, RollingIdentifier
+from ident.simulate import KERNELS as INTEGRATION_KERNELS
 from daq.sim.sensors import to_counts
 
 
@@ -102,3 +105,16 @@ def test_uncertainty_and_backbone(linear_rig_fits):
             sl = slice(int(round((fit.t[0]) * fs)), int(round(fit.t[-1] * fs)) + 1)
             zb = sosfiltfilt(design_highpass(fs, 2.0, 2), z_true[:, i])[sl]
             assert b.amplitude_m == pytest.approx(np.sqrt(2) * np.sqrt(np.mean(zb**2)), rel=0.03)
+            # the terms' RMS over the window: the constant 1, z's is the amplitude's over sqrt 2, F's the base's
+            assert b.term_rms[names.index("1")] == 1.0
+            assert b.term_rms[names.index("z")] == pytest.approx(b.amplitude_m / np.sqrt(2), rel=1e-12)
+            assert b.term_rms[names.index("F")] == pytest.approx(np.sqrt(np.mean(fit.base**2)), rel=1e-12)
+
+
+def test_warm_up_compiles_the_kernels_the_fits_run(linear_rig_fits):
+    """One compiled signature per kernel, the one warm_up compiles: the fits (sweeps, refinements, ensembles)
+    ran before, and a second signature (a read-only array is one) would have been compiled in mid-stream,
+    stalling the first refinement for seconds."""
+    warm_up()
+    assert {k.__name__: len(k.signatures) for k in INTEGRATION_KERNELS + ENSEMBLE_KERNELS} == {
+        k.__name__: 1 for k in INTEGRATION_KERNELS + ENSEMBLE_KERNELS}

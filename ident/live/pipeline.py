@@ -17,9 +17,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..ensemble import KERNELS as ENSEMBLE_KERNELS, block_bootstrap
 from ..filters import design_lowpass, lowpass_block, lowpass_start
 from ..library import PolynomialForcingLibrary
-from ..simulate import PARALLEL_MIN_WORK, simulate
+from ..simulate import KERNELS as INTEGRATION_KERNELS, PARALLEL_MIN_WORK, simulate
+from ..simulate import kernels_cached as _cached
 from .regimes import RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow
 from .rolling import RollingConfig, RollingIdentifier, WindowFit
 
@@ -86,18 +88,26 @@ def model_records(fit: WindowFit) -> list[dict]:
     return out
 
 
+def kernels_cached() -> bool | None:
+    """Whether numba's disk cache holds every kernel ``warm_up`` compiles (None: cannot tell)."""
+    return _cached(INTEGRATION_KERNELS + ENSEMBLE_KERNELS)
+
+
 def warm_up() -> None:
-    """Compile the numba kernels the rolling identification uses (RK4 integration, serial and parallel),
-    on tiny inputs: numba caches the machine code on disk, so only the first run after an install pays
-    (seconds); callers run this before data flows so that no window waits for the compiler."""
+    """Compile the numba kernels the rolling identification uses (RK4 integration: serial, lockstep, parallel;
+    the ensemble's STLSQ), on tiny inputs: numba caches the machine code on disk, so only the first run
+    after an install pays (seconds); callers run this before data flows so that no window waits for the
+    compiler."""
     lib = PolynomialForcingLibrary(2, 3, True, ("z", "v"))
     coefs = np.zeros((lib.n_terms, 2))
     coefs[lib.names.index("v"), 0] = 1.0
     coefs[lib.names.index("z"), 1] = -1.0
     t = np.linspace(0.0, 1.0, 64)
     simulate(lib, coefs, np.zeros(2), t, np.zeros_like(t))
+    simulate(lib, np.stack([coefs, 2 * coefs]), np.zeros(2), t, np.zeros_like(t))  # one pattern: lockstep
     n_batch = PARALLEL_MIN_WORK // (len(t) - 1) + 1
     simulate(lib, np.repeat(coefs[None], n_batch, axis=0), np.zeros(2), t, np.zeros_like(t))
+    block_bootstrap(np.eye(4), np.ones((4, 2)), 0.5, n_models=2, n_blocks=2)
 
 
 def parse_gaps(text: str | None) -> tuple[float, float] | None:

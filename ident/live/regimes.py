@@ -318,10 +318,12 @@ def spectral_features(x: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0
         if den < 0:
             delta = 0.5 * (a - c) / den
     f = float((k + delta) * df)
-    e1 = np.exp(-2j * np.pi * f * t)
     n_h = max(1, min(PEAK_HARMONICS, int(0.45 * fs_hz / f))) if f > 0 else 1
-    basis = np.cumprod(np.repeat(e1[:, None], n_h, axis=1), axis=1)  # exp(-2 pi i n f t), n = 1 .. H
-    harmonics = 2 * (basis.T @ xw) / w.sum()
+    basis = np.empty((n_h, n), complex)  # exp(-2 pi i n f t), n = 1 .. H, by products of the fundamental's
+    basis[0] = np.exp(-2j * np.pi * f * t)
+    for h in range(1, n_h):
+        np.multiply(basis[h - 1], basis[0], out=basis[h])
+    harmonics = 2 * (basis @ xw) / w.sum()
     phasors = harmonics[0]
 
     def index(freq_hz: float) -> int:  # first bin at or above freq_hz
@@ -351,6 +353,11 @@ def _low_quantile(a: np.ndarray, q: float) -> np.ndarray:
     return np.partition(a, k, axis=0)[k]
 
 
+def _clip(v: float, lo: float, hi: float) -> float:
+    """np.clip for one number (NaN stays NaN), without numpy's per-call overhead on scalars."""
+    return float(min(max(v, lo), hi))
+
+
 def _logistic(s: float) -> float:
     return float(1.0 / (1.0 + np.exp(-s)))
 
@@ -360,10 +367,10 @@ def _evidence(power: float, noise: float, fund: float, cfg: RegimeConfig) -> tup
     excess = power - noise
     ratio = excess / fund
     if excess > cfg.significance * noise:
-        e = float(np.clip(np.log10(max(ratio, 1e-9) / cfg.distortion_on) / cfg.distortion_scale, -3, 3))
+        e = _clip(np.log10(max(ratio, 1e-9) / cfg.distortion_on) / cfg.distortion_scale, -3, 3)
         return ratio, e, True
     hidden = max(noise * cfg.significance, 0.0) / fund  # the most the noise could hide
-    return ratio, float(np.clip(np.log10(max(hidden, 1e-12) / cfg.distortion_on) / cfg.distortion_scale, -3, 0)), False
+    return ratio, _clip(np.log10(max(hidden, 1e-12) / cfg.distortion_on) / cfg.distortion_scale, -3, 0), False
 
 
 def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeState, RegimeWindow, RegimeChange | None]:
@@ -411,7 +418,7 @@ def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeStat
         # evidence 2: amplitude against the gap
         if cfg.gap_m is not None:  # the waveform's peak (a stopper clips it: its fundamental stays below the gap)
             gap = float(cfg.gap_m[i])
-            e_a = float(np.clip(np.log(peak / gap) / cfg.gap_scale, -2.0, 3.0)) if peak > 0 else -2.0
+            e_a = _clip(np.log(peak / gap) / cfg.gap_scale, -2.0, 3.0) if peak > 0 else -2.0
         else:
             gap, e_a = _gap_evidence(z, free_z[i], hit_z[i], cfg)
         # evidence 3: stiffness against the free beam's (reported; not weighed: coupling and beating move it)
@@ -429,10 +436,10 @@ def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeStat
             if np.isfinite(fn):
                 free_w[i] = np.append(free_w[i], 2 * np.pi * fn)[-LEARN_WINDOWS:]
         impact_rms = float(np.sqrt(max(d_i, 0.0) * fund * sp.power_scale))
-        beams.append(BeamState(False, p, max(p, 1 - p), z, peak, gap, distortion, odd, max(d_i, 0.0), significant,
-                               fn, f_free, phase, signs[i], (e_d, e_a, e_k), impact_rms))
+        beams.append((p, max(p, 1 - p), z, peak, gap, distortion, odd, max(d_i, 0.0), significant,
+                      fn, f_free, phase, signs[i], (e_d, e_a, e_k), impact_rms))
     decision, changed = decide(state.decision, (probs[0], probs[1]), cfg)
-    beams = [replace(b, hitting=h) for b, h in zip(beams, decision.hit)]
+    beams = [BeamState(h, *b) for b, h in zip(beams, decision.hit)]
     change = None
     if changed:
         change = RegimeChange(t_end, decision.label, state.decision.label, beams[0].confidence * beams[1].confidence)
@@ -448,10 +455,18 @@ def _peak_displacement(rel_acc: np.ndarray, omega: float) -> float:
     z_n = -a_n / (n w)^2, evaluated on 128 phases."""
     if not omega > 0:
         return 0.0
-    n = np.arange(1, len(rel_acc) + 1)
+    n, phases = _harmonic_phases(len(rel_acc))
     zn = -rel_acc / (n * omega) ** 2
+    return float(np.max(np.abs(np.real(phases @ zn))))
+
+
+@lru_cache(maxsize=PEAK_HARMONICS)
+def _harmonic_phases(n_harmonics: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n = 1 .. H, exp(i n theta) on 128 phases theta over a period): the same for every window (computing
+    it took as long as the rest of the peak)."""
+    n = np.arange(1, n_harmonics + 1)
     theta = np.linspace(0.0, 2 * np.pi, 128, endpoint=False)
-    return float(np.max(np.abs(np.real(np.exp(1j * np.outer(theta, n)) @ zn))))
+    return n, np.exp(1j * np.outer(theta, n))
 
 
 def _gap_evidence(z: float, free: np.ndarray, hit: np.ndarray, cfg: RegimeConfig) -> tuple[float, float]:
@@ -468,7 +483,7 @@ def _gap_evidence(z: float, free: np.ndarray, hit: np.ndarray, cfg: RegimeConfig
     if np.isfinite(hi) and np.isfinite(lo) and lo < hi:
         gap = float(np.sqrt(lo * hi))
         spread = max(cfg.gap_scale, 0.5 * float(np.log(hi / lo)))
-        return gap, float(np.clip(np.log(z / gap) / spread, -LEARNED_CAP, LEARNED_CAP))
+        return gap, _clip(np.log(z / gap) / spread, -LEARNED_CAP, LEARNED_CAP)
     if np.isfinite(hi) and z < hi:  # below every amplitude seen hitting: far below, surely free
-        return float("nan"), float(np.clip(np.log(z / hi) / 0.15, -3.0, 0.0))
+        return float("nan"), _clip(np.log(z / hi) / 0.15, -3.0, 0.0)
     return float("nan"), 0.0

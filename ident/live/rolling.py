@@ -41,7 +41,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..ensemble import block_bootstrap, model_thresholds
+from ..ensemble import block_bootstrap, column_rms, model_thresholds
 from ..filters import lowpass_zero_phase
 from ..library import PolynomialForcingLibrary
 from ..model import SindyModel
@@ -84,6 +84,7 @@ class BeamFit:
     natural_frequency_std_hz: float  # spread of the natural frequency over the ensemble
     amplitude_m: float  # sqrt(2) RMS of the relative displacement z over the window (the backbone's abscissa)
     threshold: float  # the STLSQ threshold (unit-RMS columns) the model's active set came from
+    term_rms: np.ndarray  # (K,) RMS of each library term over the window (a term's size is coefficient x this)
 
 
 @dataclass(frozen=True)
@@ -100,6 +101,18 @@ class WindowFit:
 
 def _active(model: SindyModel) -> tuple[str, ...]:
     return tuple(f"{eq}: {t}" for eq, terms in model.as_dict().items() for t in terms)
+
+
+def _states(measured: np.ndarray, accel: np.ndarray, i: int) -> tuple[np.ndarray, np.ndarray]:
+    """Beam i's states (z, v) and their derivatives (v, r) from a window's (n, 2, 2) states and (n, 2)
+    relative accelerations, as contiguous (n, 2) arrays."""
+    xs = np.ascontiguousarray(measured[:, i, :])
+    return xs, np.column_stack([xs[:, 1], accel[:, i]])
+
+
+def _divergence_bound(xs: np.ndarray) -> float:
+    """A trajectory beyond 20 times the largest measured state has diverged (sweep's and refine's default)."""
+    return 20 * float(np.abs(xs).max())
 
 
 INTEGRATION_FS_HZ = 400.0  # integrate here: trapezoid error at 12.3 Hz is 0.3 % (1.2 % at 200 Hz)
@@ -161,7 +174,7 @@ class RollingIdentifier:
         self._prev_lam = [0.0, 0.0]
         self.windows = 0
         self.refits = 0  # windows that needed the full sweep (the rest kept the warm-start model)
-        self._pending = None  # a window whose new models await their SQP refinement
+        self._pending = None  # (the last window's first fit, the beams whose new models await SQP refinement)
         self.lib = PolynomialForcingLibrary(2, cfg.degree, True, ("z", "v"))
 
     def step(self, block: np.ndarray) -> list[WindowFit]:
@@ -189,8 +202,8 @@ class RollingIdentifier:
         """The refined fit of the last window, if one is pending (call at the end of a stream)."""
         if self._pending is None:
             return []
-        pending, self._pending = self._pending, None
-        return [self._refined(pending)]
+        (fit, beams), self._pending = self._pending, None
+        return [self._refined(fit, beams)]
 
     def fit_window(self, x: np.ndarray, t_end: float) -> WindowFit:
         """A window's first fit: the warm-start model where it still holds, else the sweep's model; where a
@@ -198,17 +211,16 @@ class RollingIdentifier:
         update of every window comes without waiting for the optimiser."""
         cfg = self.cfg
         base, z, v, r = window_coordinates(x, cfg)
-        n = len(base)
         # sample k of the stream is at k / fs and t_end = (index of the window's last sample + 1) / fs
         t = t_end - (len(x) - window_sample_index(len(x), cfg)) / cfg.fs_hz
-        fits, pred = [], np.zeros((n, 2, 2))
+        meas = np.stack([z, v], axis=2)  # (n, beam, (z, v))
+        fits, pred = [], np.zeros_like(meas)
         index = self.windows
         self.windows += 1
-        todo = {}
+        todo = []
         for i in range(2):
-            xs = np.column_stack([z[:, i], v[:, i]])
-            dx = np.column_stack([v[:, i], r[:, i]])
-            bound = 20 * np.abs(xs).max()
+            xs, dx = _states(meas, r, i)
+            bound = _divergence_bound(xs)
             prev = self._prev[i]
             keep_err = np.inf
             if prev is not None:
@@ -221,38 +233,40 @@ class RollingIdentifier:
             else:
                 self.refits += 1
                 sw = sweep(self.lib, xs, dx, t, base)
-                cands = [sw.coefficients[sw.chosen]] + ([prev.coefficients] if prev is not None else [])
-                errs = integration_errors(simulate(self.lib, np.stack(cands), xs[0], t, base, bound=bound).x, xs)
-                best = int(np.argmin(errs))
-                if best == 0:
-                    lam = float(sw.thresholds[sw.chosen])
-                coefs, err = cands[best], float(np.min(errs))
+                # the better of the sweep's choice and the previous model (the sweep integrated its choice
+                # with the same bound, the previous model was integrated above; a tie goes to the sweep)
+                err = float(sw.errors[sw.chosen])
+                if err <= keep_err:
+                    coefs, lam = sw.coefficients[sw.chosen], float(sw.thresholds[sw.chosen])
+                    pred[:, i, :] = simulate(self.lib, coefs, xs[0], t, base, bound=bound).x
+                else:
+                    coefs, err = prev.coefficients, keep_err
+                    pred[:, i, :] = keep_sim
                 self._prev_err[i] = err
-                pred[:, i, :] = simulate(self.lib, coefs, xs[0], t, base, bound=bound).x
                 if cfg.refine and np.count_nonzero(coefs):
-                    todo[i] = (xs, dx, bound, prev)
-            fits.append(self._beam_fit(i, coefs, err, lam, xs, dx, base, z[:, i], prev, index, 0))
-        meas = np.stack([np.column_stack([z[:, i], v[:, i]]) for i in range(2)], axis=1)
+                    todo.append(i)
+            fits.append(self._beam_fit(i, coefs, err, lam, xs, dx, base, prev, index, 0))
         fit = WindowFit(t_end, (fits[0], fits[1]), t, meas, pred, final=not todo, base=base, accel=r)
         if todo:
-            self._pending = (fit, todo, base, z, index)
+            self._pending = (fit, tuple(todo))
         return fit
 
-    def _refined(self, pending) -> WindowFit:
-        """SQP refinement (Stender et al. 2019) of the window's new models, from the sweep's choice."""
-        fit, todo, base, z, index = pending
+    def _refined(self, fit: WindowFit, beams: tuple[int, ...]) -> WindowFit:
+        """SQP refinement (Stender et al. 2019) of the window's new models, from the sweep's choice; the
+        window is the last one fitted (its index ``windows - 1``, which seeds its ensemble)."""
         fits, pred = list(fit.beams), fit.predicted.copy()
-        for i, (xs, dx, bound, prev) in todo.items():
+        for i in beams:
+            xs, dx = _states(fit.measured, fit.accel, i)
             quick = fits[i]
-            ref = refine(self.lib, quick.model.coefficients, xs, fit.t, base, maxiter=15, gradient="forward")
+            ref = refine(self.lib, quick.model.coefficients, xs, fit.t, fit.base, maxiter=15, gradient="forward")
             self._prev_err[i] = ref.error_after
-            b = self._beam_fit(i, ref.coefficients, ref.error_after, quick.threshold, xs, dx, base, z[:, i], prev,
-                               index, 1)
-            fits[i] = replace(b, changed=False)  # a change of active set was reported with the first fit
-            pred[:, i, :] = simulate(self.lib, ref.coefficients, xs[0], fit.t, base, bound=bound).x
+            # no previous model: a change of active set was reported with the first fit
+            fits[i] = self._beam_fit(i, ref.coefficients, ref.error_after, quick.threshold, xs, dx, fit.base, None,
+                                     self.windows - 1, 1)
+            pred[:, i, :] = simulate(self.lib, ref.coefficients, xs[0], fit.t, fit.base, bound=_divergence_bound(xs)).x
         return replace(fit, beams=(fits[0], fits[1]), predicted=pred, final=True)
 
-    def _beam_fit(self, i, coefs, err, lam, xs, dx, base, z, prev, index, stage) -> BeamFit:
+    def _beam_fit(self, i, coefs, err, lam, xs, dx, base, prev, index, stage) -> BeamFit:
         """The beam's fit with its ensemble; the model becomes the next window's warm start."""
         cfg = self.cfg
         model = SindyModel(self.lib, coefs)
@@ -262,13 +276,14 @@ class RollingIdentifier:
         act = _active(model)
         changed = prev is not None and act != _active(prev)
         theta = self.lib.transform(xs, base)
+        rms = column_rms(theta)
         rng = np.random.default_rng((index, stage))  # the window's index: the same resamples for any block split
-        ens = block_bootstrap(theta, dx, model_thresholds(theta, coefs, lam), n_models=cfg.ensemble_models,
-                              n_blocks=cfg.ensemble_blocks, rng=rng)
+        ens = block_bootstrap(theta, dx, model_thresholds(theta, coefs, lam, rms=rms), n_models=cfg.ensemble_models,
+                              n_blocks=cfg.ensemble_blocks, rng=rng, rms=rms)
         k_m = -ens.coefficients[:, iz, 1]
         fn_m = np.sqrt(k_m[k_m > 0]) / (2 * np.pi)
         fn_std = float(fn_m.std()) if fn_m.size > 1 else float("nan")
-        amp = float(np.sqrt(2.0) * np.sqrt(np.mean(z**2)))
+        amp = float(np.sqrt(2.0) * np.sqrt(np.mean(xs[:, 0] ** 2)))
         self._prev[i] = model
         self._prev_lam[i] = lam
-        return BeamFit(model, err, float(k), fn, act, changed, ens.std, ens.inclusion, fn_std, amp, lam)
+        return BeamFit(model, err, float(k), fn, act, changed, ens.std, ens.inclusion, fn_std, amp, lam, rms)
