@@ -22,6 +22,7 @@ from clitools import run_main
 from daq.cli import main as daq_main
 from daq.config import load_config
 from daq.driver import Acquisition, stable_port
+from daq.protocol import Decoder
 from daq.transport import PtyServer
 from replay.cli import main as replay_main
 from replay.formats import read_samples
@@ -131,8 +132,15 @@ def test_another_device_behind_the_same_path_is_never_merged(tmp_path, via):
     assert out.exists()  # what A gave is kept, and finished properly
     devices = {d["device_id"] for _, d in messages(out, "/rig/device")}
     assert devices == {"0000000a"}
-    seq = read_recording(out, raw=False).seq  # the serial bytes recorded hold none of B's
-    assert 3900 <= len(seq) <= 4100 and np.all(np.diff(seq) == 1)  # about 2 s of A, none of B
+    rec = read_recording(out)
+    assert 3900 <= len(rec.seq) <= 4100 and np.all(np.diff(rec.seq) == 1)  # about 2 s of A
+    # the serial bytes kept, decoded apart from the reader (which keeps only the recorded frame count):
+    # every frame in them is A's, and no status frame in them names B
+    dec = Decoder()
+    parts = [dec.feed(rec.raw), dec.flush()]
+    seq = np.concatenate([p.seq for p in parts]).astype(np.int64)
+    assert seq.size >= len(rec.seq) and np.all(np.diff(seq) == 1)  # B's frames would restart the count
+    assert {st.device_id for p in parts for st in p.status} == {0x0000000A}
     events = [d for _, d in messages(out, "/rig/events")]
     foreign = [e for e in events if e["kind"] == "foreign_device"]
     assert len(foreign) == 1 and foreign[0]["bytes_discarded"] > 0
