@@ -2,11 +2,13 @@
 
 Function-first, like scipy.signal: a streaming stage is a pure function
 (state, block) -> (state, output). The causal filter is a Butterworth in
-second-order sections run by ``sosfilt`` with its state carried between
+second-order sections run as ``sosfilt`` runs them with its state carried between
 blocks, so any split of the data into blocks gives exactly the one-shot
 output (tests/test_filters.py proves it). Offline work uses the zero-phase
-``sosfiltfilt``. The unfiltered signal is never overwritten: impacts live
-above 50 Hz.
+``sosfiltfilt``. Both run in compiled kernels that give scipy's numbers bit for
+bit (the rolling fits filter every window anew and the pipeline every block;
+scipy's per-call overhead was most of their time). The unfiltered signal is
+never overwritten: impacts live above 50 Hz.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
-from scipy.signal import butter, sosfilt, sosfilt_zi, sosfiltfilt
+from scipy.signal import butter, sosfilt_zi, sosfiltfilt
 
 DEFAULT_CUTOFF_HZ = 50.0
 
@@ -65,7 +67,8 @@ def lowpass_block(state: LowpassState, x: np.ndarray) -> tuple[LowpassState, np.
         raise ValueError("block contains NaN or inf; the filter state would be poisoned for good")
     if x.shape[0] == 0:
         return state, x.copy()
-    y, zi = sosfilt(state.sos, x, axis=0, zi=state.zi)
+    y, zi = _sosfilt(np.require(state.sos, float, "CW"), np.require(x, float, "CW"),
+                     np.require(state.zi, float, "CW"))  # scipy's sosfilt's numbers without its per-call overhead
     return LowpassState(state.sos, zi), y
 
 
@@ -100,8 +103,7 @@ def zero_phase_setup(sos: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
 def _filtfilt(sos, zi, x, pad):  # pragma: no cover - compiled
     """sosfiltfilt along axis 0 of x (n, channels) with the odd extension of ``pad`` samples at each end and
     the steady-state initial conditions zi (n_sections, 2) scaled by the first sample of each pass; every
-    operation in scipy's order (scipy.signal._sosfilt), so the output is identical. The channels run side
-    by side (independent recursions the processor overlaps)."""
+    operation in scipy's order (``_biquads``), so the output is identical."""
     n, c = x.shape
     n_sec = sos.shape[0]
     m = n + 2 * pad
@@ -114,30 +116,51 @@ def _filtfilt(sos, zi, x, pad):  # pragma: no cover - compiled
         for j in range(c):
             ext[pad + n + i, j] = 2 * x[n - 1, j] - x[n - 2 - i, j]
     z = np.empty((n_sec, 2, c))
-    x_cur = np.empty(c)
     for direction in range(2):  # forward, then backward over the forward pass's output
         first = 0 if direction == 0 else m - 1
         for s in range(n_sec):
             for j in range(c):
                 z[s, 0, j] = zi[s, 0] * ext[first, j]
                 z[s, 1, j] = zi[s, 1] * ext[first, j]
-        for k in range(m):
-            i = k if direction == 0 else m - 1 - k
-            for j in range(c):
-                x_cur[j] = ext[i, j]
-            for s in range(n_sec):
-                b0, b1, b2, a1, a2 = sos[s, 0], sos[s, 1], sos[s, 2], sos[s, 4], sos[s, 5]
-                for j in range(c):
-                    x_new = b0 * x_cur[j] + z[s, 0, j]
-                    z[s, 0, j] = b1 * x_cur[j] - a1 * x_new + z[s, 1, j]
-                    z[s, 1, j] = b2 * x_cur[j] - a2 * x_new
-                    x_cur[j] = x_new
-            for j in range(c):
-                ext[i, j] = x_cur[j]
+        _biquads(sos, z, ext, direction == 0)
     return ext[pad:pad + n].copy()
 
 
-KERNELS = (_filtfilt,)  # the compiled kernels (ident.live.pipeline.warm_up)
+@njit(cache=True, nogil=True)
+def _sosfilt(sos, x, zi):  # pragma: no cover - compiled
+    """scipy.signal.sosfilt(sos, x, axis=0, zi=zi) for x (n, channels), zi (n_sections, 2, channels):
+    (y, final state), the same numbers."""
+    y = x.copy()
+    z = zi.copy()
+    _biquads(sos, z, y, True)
+    return y, z
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _biquads(sos, z, y, forward):  # pragma: no cover - compiled
+    """Run the cascade of second-order sections over y (m, channels) in place, forward or backward in time,
+    from and into the state z (n_sections, 2, channels): scipy's recursion (scipy/signal/_sosfilt.pyx)
+    term by term, the channels side by side (independent recursions the processor overlaps)."""
+    m, c = y.shape
+    n_sec = sos.shape[0]
+    x_cur = np.empty(c)
+    for k in range(m):
+        i = k if forward else m - 1 - k
+        for j in range(c):
+            x_cur[j] = y[i, j]
+        for s in range(n_sec):
+            b0, b1, b2, a1, a2 = sos[s, 0], sos[s, 1], sos[s, 2], sos[s, 4], sos[s, 5]
+            for j in range(c):
+                x_new = b0 * x_cur[j] + z[s, 0, j]
+                z[s, 0, j] = b1 * x_cur[j] - a1 * x_new + z[s, 1, j]
+                z[s, 1, j] = b2 * x_cur[j] - a2 * x_new
+                x_cur[j] = x_new
+        for j in range(c):
+            y[i, j] = x_cur[j]
+
+
+KERNELS = (_filtfilt,)  # the zero-phase filter's (the rolling fits')
+CAUSAL_KERNELS = (_sosfilt,)  # the causal block filter's (the pipeline's, with or without identification)
 
 
 def lowpass_zero_phase(x: np.ndarray, fs_hz: float, cutoff_hz: float = DEFAULT_CUTOFF_HZ,

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..ensemble import KERNELS as ENSEMBLE_KERNELS, block_bootstrap
-from ..filters import KERNELS as FILTER_KERNELS, design_lowpass, lowpass_block, lowpass_start
+from ..filters import CAUSAL_KERNELS, KERNELS as FILTER_KERNELS, design_lowpass, lowpass_block, lowpass_start
 from ..library import PolynomialForcingLibrary
 from ..physical import KERNELS as PHYSICAL_KERNELS
 from ..simulate import KERNELS as INTEGRATION_KERNELS, PARALLEL_MIN_WORK, simulate
@@ -89,7 +89,7 @@ def model_records(fit: WindowFit) -> list[dict]:
     return out
 
 
-MONITOR_KERNELS = REGIME_KERNELS  # compiled kernels the regime monitor runs (also with identification off)
+MONITOR_KERNELS = CAUSAL_KERNELS + REGIME_KERNELS  # the causal filter's and the regime monitor's (always run)
 IDENTIFY_KERNELS = INTEGRATION_KERNELS + ENSEMBLE_KERNELS + FILTER_KERNELS + PHYSICAL_KERNELS  # ... the fits run
 
 
@@ -99,12 +99,13 @@ def kernels_cached(identify: bool = True) -> bool | None:
 
 
 def warm_up(identify: bool = True) -> None:
-    """Compile the numba kernels the pipeline uses, on tiny inputs: the regime monitor's spectral features
-    always, and with ``identify`` the rolling identification's (the window's filters and integration; RK4
+    """Compile the numba kernels the pipeline uses, on tiny inputs: the causal filter's and the regime
+    monitor's always, and with ``identify`` the rolling identification's (the window's filters and integration; RK4
     integration: serial, lockstep, parallel; the ensemble's STLSQ). numba caches the machine code on disk,
     so only the first run after an install pays (seconds); loading even a cached kernel costs a moment the
     first time in a process (a tenth of a second for the first), so callers run this before data flows and
     no window waits for the compiler or the loader."""
+    lowpass_block(lowpass_start(design_lowpass(64.0, 10.0), 3), np.zeros((8, 3)))
     spectral_features(np.zeros((64, 3)), 64.0)
     if not identify:
         return
