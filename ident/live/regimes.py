@@ -68,6 +68,7 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
+import scipy.fft
 from numba import njit
 
 LABELS = ("linear", "localized-1", "localized-2", "impacting-both")
@@ -240,7 +241,7 @@ def regime_step(state: RegimeState, block: np.ndarray) -> tuple[RegimeState, lis
     cfg = state.cfg
     n_win = int(round(cfg.window_s * cfg.fs_hz))
     n_hop = max(1, int(round(cfg.hop_s * cfg.fs_hz)))
-    windows, changes = [], []
+    done = []  # (samples, samples seen at its end) of every window the block completes
     buf, since, n_seen = state.buf, state.since_hop, state.n_seen
     i = 0
     while i < len(x):
@@ -252,11 +253,15 @@ def regime_step(state: RegimeState, block: np.ndarray) -> tuple[RegimeState, lis
         if since == n_hop:
             since = 0
             if len(buf) == n_win:
-                state = replace(state, buf=buf, since_hop=since, n_seen=n_seen)
-                state, w, ch = _window(state, buf, n_seen / cfg.fs_hz)
-                windows.append(w)
-                if ch is not None:
-                    changes.append(ch)
+                done.append((buf, n_seen))
+    windows, changes = [], []
+    if done:  # the spectra depend on the samples alone: all of the block's windows at once
+        spectra = spectral_batch(np.stack([b for b, _ in done]), cfg.fs_hz, cfg.min_frequency_hz)
+        for (_, end), sp in zip(done, spectra):
+            state, w, ch = _window(state, sp, end / cfg.fs_hz)
+            windows.append(w)
+            if ch is not None:
+                changes.append(ch)
     state = replace(state, buf=buf, since_hop=since, n_seen=n_seen)
     return state, windows, changes
 
@@ -292,87 +297,107 @@ class _Spectral:
 
 
 @lru_cache(maxsize=16)
-def _window_arrays(n: int, fs_hz: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """Hann window, sample times and the window's power normalisation, per window length and rate."""
+def _window_arrays(n: int, fs_hz: float) -> tuple[np.ndarray, np.ndarray, float, np.float64]:
+    """Hann window, sample times, the window's power normalisation and its sum, per window length and rate."""
     w = np.hanning(n)
-    return w, np.arange(n) / fs_hz, float(np.sum(w**2))
+    return w, np.arange(n) / fs_hz, float(np.sum(w**2)), w.sum()
 
 
 def spectral_features(x: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) -> _Spectral:
-    """Drive frequency, phasors and band powers of one window (n, 3).
+    """Drive frequency, phasors and band powers of one window (n, 3)."""
+    return spectral_batch(np.asarray(x, float)[None], fs_hz, min_frequency_hz)[0]
+
+
+def spectral_batch(xs: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) -> list[_Spectral]:
+    """``spectral_features`` of W windows (W, n, 3) at once (a block's windows: one FFT, one call per kernel).
 
     The element-wise work around the FFT (removing the mean and windowing, the power spectrum, its
     peak, the band sums and the floor's order statistic) runs in compiled kernels (``_windowed``,
-    ``_power``, ``_bands``) that reproduce numpy's order of operations, so the features are bit for bit
-    those of the plain numpy expressions (``daq bench --regimes``' cases and the recordings were checked
-    window by window); in numpy they took half the monitor's time in calls on small arrays.
+    ``_power``, ``_bands``) that reproduce numpy's order of operations; the FFT is scipy's (numpy's
+    pocketfft numbers, faster on a batch of rows), the harmonics' basis and its product with the window
+    numpy's. The features are bit for bit those of the plain per-window numpy expressions the monitor had
+    (every window of ``daq bench --regimes``' cached cases and of the recordings was checked); in numpy,
+    one window at a time, they took half the monitor's time in calls on small arrays.
     """
-    n = len(x)
-    w, t, w2 = _window_arrays(n, float(fs_hz))
-    xw = _windowed(np.require(x, float, "CW"), w)  # (3, n): channels in rows, for the FFT; one signature
+    xs = np.require(xs, float, "CW")  # one compiled signature
+    n_w, n = xs.shape[0], xs.shape[1]
+    w, t, w2, w_sum = _window_arrays(n, float(fs_hz))
+    xw = _windowed(xs, w)  # (W, 3, n): channels in rows, for the FFT
     pad = 4
     nfft = pad * n
-    spec = np.fft.rfft(xw, nfft, axis=-1)
+    spec = scipy.fft.rfft(xw, nfft, axis=-1)
     df = fs_hz / nfft
     top = 0.3 * fs_hz
     lo = int(np.ceil(min_frequency_hz / df))
     hi = max(lo + 1, int(top / df))
-    if lo >= spec.shape[1]:
+    if lo >= spec.shape[-1]:
         raise ValueError(f"min_frequency_hz {min_frequency_hz} lies above the Nyquist frequency {fs_hz / 2}")
-    p, k = _power(spec, lo, hi)  # (3, nfft / 2 + 1) and the base's peak bin in [lo, hi)
-    delta = 0.0
-    if 0 < k < p.shape[1] - 1:  # parabolic interpolation of the log peak
-        a, b, c = np.log(p[0, k - 1:k + 2] + 1e-300)
-        den = a - 2 * b + c
-        if den < 0:
-            delta = 0.5 * (a - c) / den
-    f = float((k + delta) * df)
-    n_h = max(1, min(PEAK_HARMONICS, int(0.45 * fs_hz / f))) if f > 0 else 1
-    basis = np.empty((n_h, n), complex)  # exp(-2 pi i n f t), n = 1 .. H, by products of the fundamental's
-    basis[0] = np.exp(-2j * np.pi * f * t)
-    for h in range(1, n_h):
-        np.multiply(basis[h - 1], basis[0], out=basis[h])
-    harmonics = 2 * (basis @ xw.T) / w.sum()
-    phasors = harmonics[0]
-
+    p, peaks = _power(spec, lo, hi)  # (W, 3, nfft / 2 + 1) and each window's base peak bin in [lo, hi)
+    fs_ = []
+    for q in range(n_w):
+        k = int(peaks[q])
+        delta = 0.0
+        if 0 < k < p.shape[-1] - 1:  # parabolic interpolation of the log peak
+            a, b, c = np.log(p[q, 0, k - 1:k + 2] + 1e-300)
+            den = a - 2 * b + c
+            if den < 0:
+                delta = 0.5 * (a - c) / den
+        fs_.append(float((k + delta) * df))
+    f = np.array(fs_)
+    n_hs = [max(1, min(PEAK_HARMONICS, int(0.45 * fs_hz / fq))) if fq > 0 else 1 for fq in fs_]
+    basis = np.empty((n_w, max(n_hs), n), complex)  # exp(-2 pi i h f t), h = 1 .. H, by products of the fundamental's
+    basis[:, 0] = np.exp(-2j * np.pi * f[:, None] * t)
+    for h in range(1, basis.shape[1]):
+        np.multiply(basis[:, h - 1], basis[:, 0], out=basis[:, h])
     fund, harm, imp, odd, low, bins = _bands(p, f, df, top, FLOOR_QUANTILE)
     floor = low / _FLOOR_NORM  # (zero where the bands are empty)
     scale = 2.0 / (n * w2 * pad)
-    return _Spectral(f, phasors, harmonics, fund, harm, odd, imp, bins, floor, scale)
+    out = []
+    for q in range(n_w):
+        harmonics = 2 * (basis[q, :n_hs[q]] @ xw[q].T) / w_sum
+        out.append(_Spectral(fs_[q], harmonics[0], harmonics, fund[q], harm[q], odd[q], imp[q],
+                             (int(bins[q, 0]), int(bins[q, 1]), int(bins[q, 2])), floor[q], scale))
+    return out
 
 
 @njit(cache=True, nogil=True)
-def _windowed(x, w):  # pragma: no cover - compiled
-    """(x - x.mean(axis=0)) * w[:, None], transposed to (channels, n): numpy's axis-0 mean adds the rows in
-    order and divides by n, which is what this does."""
-    n, c = x.shape
-    m = np.zeros(c)
-    for i in range(n):
+def _windowed(xs, w):  # pragma: no cover - compiled
+    """(x - x.mean(axis=0)) * w[:, None] of every window x in xs (W, n, c), transposed to (W, c, n): numpy's
+    axis-0 mean of a C-contiguous array adds the rows in order and divides by n, which is what this does."""
+    n_w, n, c = xs.shape
+    out = np.empty((n_w, c, n))
+    m = np.empty(c)
+    for q in range(n_w):
+        m[:] = 0.0
+        for i in range(n):
+            for j in range(c):
+                m[j] += xs[q, i, j]
         for j in range(c):
-            m[j] += x[i, j]
-    for j in range(c):
-        m[j] = m[j] / n
-    out = np.empty((c, n))
-    for i in range(n):
-        for j in range(c):
-            out[j, i] = (x[i, j] - m[j]) * w[i]
+            m[j] = m[j] / n
+        for i in range(n):
+            for j in range(c):
+                out[q, j, i] = (xs[q, i, j] - m[j]) * w[i]
     return out
 
 
 @njit(cache=True, nogil=True)
 def _power(spec, lo, hi):  # pragma: no cover - compiled
-    """(|spec|^2 as re^2 + im^2, the first bin of the largest power of row 0 in [lo, hi)), as np.argmax."""
-    c, nb = spec.shape
-    p = np.empty((c, nb))
-    for j in range(c):
-        for i in range(nb):
-            v = spec[j, i]
-            p[j, i] = v.real * v.real + v.imag * v.imag
-    k = lo
-    for i in range(lo, min(hi, nb)):
-        if p[0, i] > p[0, k]:
-            k = i
-    return p, k
+    """(|spec|^2 as re^2 + im^2 of spec (W, c, bins), per window the first bin of the largest power of row 0
+    in [lo, hi), as np.argmax)."""
+    n_w, c, nb = spec.shape
+    p = np.empty((n_w, c, nb))
+    peaks = np.empty(n_w, np.int64)
+    for q in range(n_w):
+        for j in range(c):
+            for i in range(nb):
+                v = spec[q, j, i]
+                p[q, j, i] = v.real * v.real + v.imag * v.imag
+        k = lo
+        for i in range(lo, min(hi, nb)):
+            if p[q, 0, i] > p[q, 0, k]:
+                k = i
+        peaks[q] = k
+    return p, peaks
 
 
 @njit(cache=True, nogil=True)
@@ -383,38 +408,44 @@ def _first_bin(freq_hz, df, n_bins):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _bands(p, f, df, top, quantile):  # pragma: no cover - compiled
-    """The band powers of ``_Spectral`` per row of p (bins df apart): sums over [0.5 f, 1.5 f), [1.5 f, 10.5 f),
-    [10.5 f, top) and within f / 4 of 3 f and 5 f (each added bin by bin from its first, as numpy's sum
-    along the rows' axis); the ``quantile`` (lower order statistic) of the bins in [1.5 f, top) (exact
-    whatever the selection algorithm; zero if there are none); the bins in the harmonic band, at the odd
-    harmonics and in the impact band."""
-    c, nb = p.shape
-    i_f, i_h = _first_bin(0.5 * f, df, nb), _first_bin(1.5 * f, df, nb)
-    i_i, i_top = _first_bin(min(10.5 * f, top), df, nb), _first_bin(top, df, nb)
-    i_i = max(i_h, i_i)
-    fund, harm, imp, odd, low = np.zeros(c), np.zeros(c), np.zeros(c), np.zeros(c), np.zeros(c)
-    n_odd = 0
-    for m in (3, 5):
-        a0 = max(_first_bin((m - 0.25) * f, df, nb), i_h)
-        a1 = min(_first_bin((m + 0.25) * f, df, nb), i_i)
-        if a1 > a0:
-            n_odd += a1 - a0
-            for j in range(c):
-                part = 0.0
-                for i in range(a0, a1):
-                    part += p[j, i]
-                odd[j] += part
-    q = min(i_top - i_h - 1, int(quantile * (i_top - i_h - 1)))
-    for j in range(c):
-        for i in range(i_f, i_h):
-            fund[j] += p[j, i]
-        for i in range(i_h, i_i):
-            harm[j] += p[j, i]
-        for i in range(i_i, i_top):
-            imp[j] += p[j, i]
-        if i_top > i_h:
-            low[j] = np.partition(p[j, i_h:i_top].copy(), q)[q]
-    return fund, harm, imp, odd, low, (i_i - i_h, n_odd, i_top - i_i)
+    """The band powers of ``_Spectral`` per window q and row of p (W, c, bins; bins df apart), f[q] the
+    window's drive frequency: sums over [0.5 f, 1.5 f), [1.5 f, 10.5 f), [10.5 f, top) and within f / 4 of
+    3 f and 5 f (each added bin by bin from its first, as numpy's sum along the rows' axis); the
+    ``quantile`` (lower order statistic) of the bins in [1.5 f, top) (exact whatever the selection
+    algorithm; zero if there are none); the bins in the harmonic band, at the odd harmonics and in the
+    impact band."""
+    n_w, c, nb = p.shape
+    fund, harm, imp = np.zeros((n_w, c)), np.zeros((n_w, c)), np.zeros((n_w, c))
+    odd, low = np.zeros((n_w, c)), np.zeros((n_w, c))
+    bins = np.zeros((n_w, 3), np.int64)
+    for q in range(n_w):
+        fq = f[q]
+        i_f, i_h = _first_bin(0.5 * fq, df, nb), _first_bin(1.5 * fq, df, nb)
+        i_i, i_top = _first_bin(min(10.5 * fq, top), df, nb), _first_bin(top, df, nb)
+        i_i = max(i_h, i_i)
+        n_odd = 0
+        for m in (3, 5):
+            a0 = max(_first_bin((m - 0.25) * fq, df, nb), i_h)
+            a1 = min(_first_bin((m + 0.25) * fq, df, nb), i_i)
+            if a1 > a0:
+                n_odd += a1 - a0
+                for j in range(c):
+                    part = 0.0
+                    for i in range(a0, a1):
+                        part += p[q, j, i]
+                    odd[q, j] += part
+        r = min(i_top - i_h - 1, int(quantile * (i_top - i_h - 1)))
+        for j in range(c):
+            for i in range(i_f, i_h):
+                fund[q, j] += p[q, j, i]
+            for i in range(i_h, i_i):
+                harm[q, j] += p[q, j, i]
+            for i in range(i_i, i_top):
+                imp[q, j] += p[q, j, i]
+            if i_top > i_h:
+                low[q, j] = np.partition(p[q, j, i_h:i_top].copy(), r)[r]
+        bins[q, 0], bins[q, 1], bins[q, 2] = i_i - i_h, n_odd, i_top - i_i
+    return fund, harm, imp, odd, low, bins
 
 
 KERNELS = (_windowed, _power, _bands)  # the monitor's compiled kernels (ident.live.pipeline.warm_up)
@@ -446,9 +477,9 @@ def _evidence(power: float, noise: float, fund: float, cfg: RegimeConfig) -> tup
     return ratio, _clip(np.log10(max(hidden, 1e-12) / cfg.distortion_on) / cfg.distortion_scale, -3, 0), False
 
 
-def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeState, RegimeWindow, RegimeChange | None]:
+def _window(state: RegimeState, sp: _Spectral, t_end: float) -> tuple[RegimeState, RegimeWindow, RegimeChange | None]:
+    """One window's features, evidence and decision from its spectrum and what the stream has taught."""
     cfg = state.cfg
-    sp = spectral_features(x, cfg.fs_hz, cfg.min_frequency_hz)
     f = sp.f_hz
     omega = 2 * np.pi * f
     base = sp.phasors[0]
