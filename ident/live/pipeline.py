@@ -22,6 +22,7 @@ from ..filters import CAUSAL_KERNELS, KERNELS as FILTER_KERNELS, design_lowpass,
 from ..library import PolynomialForcingLibrary
 from ..physical import KERNELS as PHYSICAL_KERNELS
 from ..simulate import KERNELS as INTEGRATION_KERNELS, PARALLEL_MIN_WORK, simulate
+from ..sindy import KERNELS as SINDY_KERNELS, integration_errors
 from ..simulate import kernels_cached as _cached
 from .regimes import KERNELS as REGIME_KERNELS, RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow, spectral_features
 from .rolling import RollingConfig, RollingIdentifier, WindowFit, window_coordinates
@@ -90,7 +91,8 @@ def model_records(fit: WindowFit) -> list[dict]:
 
 
 MONITOR_KERNELS = CAUSAL_KERNELS + REGIME_KERNELS  # the causal filter's and the regime monitor's (always run)
-IDENTIFY_KERNELS = INTEGRATION_KERNELS + ENSEMBLE_KERNELS + FILTER_KERNELS + PHYSICAL_KERNELS  # ... the fits run
+IDENTIFY_KERNELS = (INTEGRATION_KERNELS + SINDY_KERNELS + ENSEMBLE_KERNELS + FILTER_KERNELS
+                    + PHYSICAL_KERNELS)  # ... the rolling fits run
 
 
 def kernels_cached(identify: bool = True) -> bool | None:
@@ -101,7 +103,7 @@ def kernels_cached(identify: bool = True) -> bool | None:
 def warm_up(identify: bool = True) -> None:
     """Compile the numba kernels the pipeline uses, on tiny inputs: the causal filter's and the regime
     monitor's always, and with ``identify`` the rolling identification's (the window's filters and integration; RK4
-    integration: serial, lockstep, parallel; the ensemble's STLSQ). numba caches the machine code on disk,
+    integration: serial, lockstep, parallel; integration errors; the ensemble's STLSQ). numba caches the machine code on disk,
     so only the first run after an install pays (seconds); loading even a cached kernel costs a moment the
     first time in a process (a tenth of a second for the first), so callers run this before data flows and
     no window waits for the compiler or the loader."""
@@ -118,7 +120,8 @@ def warm_up(identify: bool = True) -> None:
     simulate(lib, coefs, np.zeros(2), t, np.zeros_like(t))
     simulate(lib, np.stack([coefs, 2 * coefs]), np.zeros(2), t, np.zeros_like(t))  # one pattern: lockstep
     n_batch = PARALLEL_MIN_WORK // (len(t) - 1) + 1
-    simulate(lib, np.repeat(coefs[None], n_batch, axis=0), np.zeros(2), t, np.zeros_like(t))
+    sim = simulate(lib, np.repeat(coefs[None], n_batch, axis=0), np.zeros(2), t, np.zeros_like(t))
+    integration_errors(sim.x, np.ones((len(t), 2)))
     block_bootstrap(np.eye(4), np.ones((4, 2)), 0.5, n_models=2, n_blocks=2)
 
 
