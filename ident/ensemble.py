@@ -36,7 +36,8 @@ class Ensemble:
 def block_counts(n_models: int, n_blocks: int, rng: np.random.Generator) -> np.ndarray:
     """(n_models, n_blocks) how often each block is drawn: n_blocks draws with replacement per model."""
     draws = rng.integers(0, n_blocks, size=(n_models, n_blocks))
-    return (draws[:, :, None] == np.arange(n_blocks)).sum(axis=1).astype(float)
+    cells = (draws + n_blocks * np.arange(n_models)[:, None]).ravel()  # model m's draw of block j: cell m n_blocks + j
+    return np.bincount(cells, minlength=n_models * n_blocks).reshape(n_models, n_blocks).astype(float)
 
 
 def column_rms(theta: np.ndarray) -> np.ndarray:
