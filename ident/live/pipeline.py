@@ -24,7 +24,7 @@ from ..physical import KERNELS as PHYSICAL_KERNELS
 from ..simulate import KERNELS as INTEGRATION_KERNELS, PARALLEL_MIN_WORK, simulate
 from ..sindy import KERNELS as SINDY_KERNELS, integration_errors
 from ..simulate import kernels_cached as _cached
-from .regimes import KERNELS as REGIME_KERNELS, RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow, spectral_features
+from .regimes import KERNELS as REGIME_KERNELS, RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow
 from .rolling import RollingConfig, RollingIdentifier, WindowFit, window_coordinates
 
 
@@ -108,7 +108,7 @@ def warm_up(identify: bool = True) -> None:
     first time in a process (a tenth of a second for the first), so callers run this before data flows and
     no window waits for the compiler or the loader."""
     lowpass_block(lowpass_start(design_lowpass(64.0, 10.0), 3), np.zeros((8, 3)))
-    spectral_features(np.zeros((64, 3)), 64.0)
+    RegimeMonitor(RegimeConfig(fs_hz=64.0)).step(np.zeros((64, 3)))  # two windows of 32 samples
     if not identify:
         return
     window_coordinates(np.zeros((1600, 3)), RollingConfig(fs_hz=400.0, fs_ident_hz=200.0))
