@@ -168,7 +168,7 @@ def record(args) -> int:
     live = None
     try:
         # before the port opens, so that a device's bytes do not wait in the port's buffer meanwhile
-        compile_s = 0.0 if args.no_identify else compile_kernels()
+        compile_s = compile_kernels(identify=not args.no_identify)
         acq.open()  # a wrong port fails here, before any file exists
         # always: --no-identify leaves out the rolling SINDy only; the filters and the regime monitor run,
         # and its events go to the recording (and to --events)
@@ -383,17 +383,18 @@ class LiveProcessing:
                    else "") + (f"; ERROR {self.error}" if self.error else ""))
 
 
-def compile_kernels() -> float:
-    """Compile the identification's numba kernels before data flows, so that no window waits for the
-    compiler: from numba's disk cache this takes a moment; the first run after an install compiles for
-    some seconds and says so on a terminal while it does. Seconds taken."""
-    cold = kernels_cached() is False
+def compile_kernels(identify: bool = True) -> float:
+    """Compile the pipeline's numba kernels (the regime monitor's, and the identification's unless
+    ``identify`` is off) before data flows, so that no window waits for the compiler or the loader: from
+    numba's disk cache this takes a moment; the first run after an install compiles for some seconds and
+    says so on a terminal while it does. Seconds taken."""
+    cold = kernels_cached(identify) is False
     tell = cold and sys.stderr.isatty()
     if tell:
-        print("compiling the identification kernels before the first sample (first run after an install; "
+        print("compiling the pipeline's kernels before the first sample (first run after an install; "
               "numba caches them, so later runs start at once)...", end="", file=sys.stderr, flush=True)
     t0 = time.monotonic()
-    warm_up()
+    warm_up(identify)
     took = time.monotonic() - t0
     if tell:
         print(f" compiled in {took:.1f} s", file=sys.stderr, flush=True)

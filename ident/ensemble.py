@@ -36,7 +36,8 @@ class Ensemble:
 def block_counts(n_models: int, n_blocks: int, rng: np.random.Generator) -> np.ndarray:
     """(n_models, n_blocks) how often each block is drawn: n_blocks draws with replacement per model."""
     draws = rng.integers(0, n_blocks, size=(n_models, n_blocks))
-    return (draws[:, :, None] == np.arange(n_blocks)).sum(axis=1).astype(float)
+    cells = (draws + n_blocks * np.arange(n_models)[:, None]).ravel()  # model m's draw of block j: cell m n_blocks + j
+    return np.bincount(cells, minlength=n_models * n_blocks).reshape(n_models, n_blocks).astype(float)
 
 
 def column_rms(theta: np.ndarray) -> np.ndarray:
@@ -75,8 +76,41 @@ def block_bootstrap(theta: np.ndarray, dxdt: np.ndarray, threshold: float | np.n
     c = np.einsum("mb,bij->mij", counts, cross)
     thr = np.broadcast_to(np.asarray(threshold, float), (dxdt.shape[1],))
     xi = _batched_stlsq(a, c, thr, max_iter)
-    coefs = xi / scale[None, :, None]
+    if k * dxdt.shape[1] > 1:
+        return Ensemble(*_ensemble_stats(xi, scale))
+    coefs = xi / scale[None, :, None]  # a single coefficient: numpy sums its models pairwise, the kernel in order
     return Ensemble(coefs.mean(axis=0), coefs.std(axis=0), (coefs != 0).mean(axis=0), coefs)
+
+
+@njit(cache=True, nogil=True)
+def _ensemble_stats(xi, scale):  # pragma: no cover - compiled
+    """(mean, std, inclusion, coefficients) of the models xi (B, K, n), K n > 1, on unit-RMS columns, the coefficients
+    xi / scale: numpy's coefs.mean(axis=0), coefs.std(axis=0) and (coefs != 0).mean(axis=0) bit for bit (an
+    axis-0 reduction of a C-contiguous array adds the models in order; std is the square root of the mean
+    squared deviation from that mean), without five numpy calls on a (32, 11, 2) array."""
+    b_n, k, n = xi.shape
+    coefs = np.empty((b_n, k, n))
+    mean = np.zeros((k, n))
+    var = np.zeros((k, n))
+    inclusion = np.zeros((k, n))
+    for b in range(b_n):
+        for i in range(k):
+            for e in range(n):
+                v = xi[b, i, e] / scale[i]
+                coefs[b, i, e] = v
+                mean[i, e] += v
+                inclusion[i, e] += v != 0.0
+    for i in range(k):
+        for e in range(n):
+            mean[i, e] = mean[i, e] / b_n
+            inclusion[i, e] = inclusion[i, e] / b_n
+    for b in range(b_n):
+        for i in range(k):
+            for e in range(n):
+                d = coefs[b, i, e] - mean[i, e]
+                var[i, e] += d * d
+    std = np.sqrt(var / b_n)
+    return mean, std, inclusion, coefs
 
 
 def model_thresholds(theta: np.ndarray, coefficients: np.ndarray, fallback: float = 0.0, *,
@@ -180,4 +214,4 @@ def _solve_in_place(m, r, na):  # pragma: no cover - compiled
     return True
 
 
-KERNELS = (_stlsq_normal,)  # the compiled kernels (ident.simulate.kernels_cached)
+KERNELS = (_stlsq_normal, _ensemble_stats)  # the compiled kernels (ident.simulate.kernels_cached)

@@ -2,11 +2,13 @@
 
 Function-first, like scipy.signal: a streaming stage is a pure function
 (state, block) -> (state, output). The causal filter is a Butterworth in
-second-order sections run by ``sosfilt`` with its state carried between
+second-order sections run as ``sosfilt`` runs them with its state carried between
 blocks, so any split of the data into blocks gives exactly the one-shot
 output (tests/test_filters.py proves it). Offline work uses the zero-phase
-``sosfiltfilt``. The unfiltered signal is never overwritten: impacts live
-above 50 Hz.
+``sosfiltfilt``. Both run in compiled kernels that give scipy's numbers bit for
+bit (the rolling fits filter every window anew and the pipeline every block;
+scipy's per-call overhead was most of their time). The unfiltered signal is
+never overwritten: impacts live above 50 Hz.
 """
 
 from __future__ import annotations
@@ -15,7 +17,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.signal import butter, sosfilt, sosfilt_zi, sosfiltfilt
+from numba import njit
+from scipy.signal import butter, sosfilt_zi, sosfiltfilt
 
 DEFAULT_CUTOFF_HZ = 50.0
 
@@ -64,7 +67,8 @@ def lowpass_block(state: LowpassState, x: np.ndarray) -> tuple[LowpassState, np.
         raise ValueError("block contains NaN or inf; the filter state would be poisoned for good")
     if x.shape[0] == 0:
         return state, x.copy()
-    y, zi = sosfilt(state.sos, x, axis=0, zi=state.zi)
+    y, zi = _sosfilt(np.require(state.sos, float, "CW"), np.require(x, float, "CW"),
+                     np.require(state.zi, float, "CW"))  # scipy's sosfilt's numbers without its per-call overhead
     return LowpassState(state.sos, zi), y
 
 
@@ -74,19 +78,89 @@ def _steady_state(sos_bytes: bytes, n_sections: int) -> np.ndarray:
 
 
 def zero_phase(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """scipy.signal.sosfiltfilt(sos, x, axis=0) (odd extension, default pad length), with the filter's
-    steady-state initial conditions cached per design: the rolling fits filter every window anew."""
+    """scipy.signal.sosfiltfilt(sos, x, axis=0) (odd extension, default pad length), bit for bit: the
+    filter's steady-state initial conditions cached per design and the extension, both passes and the
+    trim in one compiled kernel (``_filtfilt``, scipy's biquad recursion term by term), since the
+    rolling fits filter every window anew and scipy's per-call overhead was most of the time."""
     x = np.asarray(x, float)
+    sos, zi, pad = zero_phase_setup(sos)
+    if x.shape[0] <= pad or x.ndim > 2:
+        return sosfiltfilt(sos, x, axis=0)
+    y = _filtfilt(sos, zi, np.require(x.reshape(x.shape[0], -1), requirements="CW"), pad)  # one signature
+    return y.reshape(x.shape)
+
+
+def zero_phase_setup(sos: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """(sos as a contiguous float array, its steady-state initial conditions (cached per design), scipy's
+    default pad length): what ``_filtfilt`` takes."""
+    sos = np.ascontiguousarray(sos, float)
     n_sec = sos.shape[0]
     pad = 3 * (2 * n_sec + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum())))
-    if x.shape[0] <= pad:
-        return sosfiltfilt(sos, x, axis=0)
-    ext = np.concatenate([2 * x[:1] - x[pad:0:-1], x, 2 * x[-1:] - x[-2:-pad - 2:-1]])
-    zi = _steady_state(np.ascontiguousarray(sos, float).tobytes(), n_sec)
-    zi = zi.reshape(n_sec, 2, *([1] * (x.ndim - 1)))
-    y, _ = sosfilt(sos, ext, axis=0, zi=zi * ext[:1])
-    y, _ = sosfilt(sos, y[::-1], axis=0, zi=zi * y[-1:])
-    return y[::-1][pad:-pad]
+    return sos, _steady_state(sos.tobytes(), n_sec), pad
+
+
+@njit(cache=True, nogil=True)
+def _filtfilt(sos, zi, x, pad):  # pragma: no cover - compiled
+    """sosfiltfilt along axis 0 of x (n, channels) with the odd extension of ``pad`` samples at each end and
+    the steady-state initial conditions zi (n_sections, 2) scaled by the first sample of each pass; every
+    operation in scipy's order (``_biquads``), so the output is identical."""
+    n, c = x.shape
+    n_sec = sos.shape[0]
+    m = n + 2 * pad
+    ext = np.empty((m, c))
+    for i in range(pad):
+        for j in range(c):
+            ext[i, j] = 2 * x[0, j] - x[pad - i, j]
+    ext[pad:pad + n] = x
+    for i in range(pad):
+        for j in range(c):
+            ext[pad + n + i, j] = 2 * x[n - 1, j] - x[n - 2 - i, j]
+    z = np.empty((n_sec, 2, c))
+    for direction in range(2):  # forward, then backward over the forward pass's output
+        first = 0 if direction == 0 else m - 1
+        for s in range(n_sec):
+            for j in range(c):
+                z[s, 0, j] = zi[s, 0] * ext[first, j]
+                z[s, 1, j] = zi[s, 1] * ext[first, j]
+        _biquads(sos, z, ext, direction == 0)
+    return ext[pad:pad + n].copy()
+
+
+@njit(cache=True, nogil=True)
+def _sosfilt(sos, x, zi):  # pragma: no cover - compiled
+    """scipy.signal.sosfilt(sos, x, axis=0, zi=zi) for x (n, channels), zi (n_sections, 2, channels):
+    (y, final state), the same numbers."""
+    y = x.copy()
+    z = zi.copy()
+    _biquads(sos, z, y, True)
+    return y, z
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _biquads(sos, z, y, forward):  # pragma: no cover - compiled
+    """Run the cascade of second-order sections over y (m, channels) in place, forward or backward in time,
+    from and into the state z (n_sections, 2, channels): scipy's recursion (scipy/signal/_sosfilt.pyx)
+    term by term, the channels side by side (independent recursions the processor overlaps)."""
+    m, c = y.shape
+    n_sec = sos.shape[0]
+    x_cur = np.empty(c)
+    for k in range(m):
+        i = k if forward else m - 1 - k
+        for j in range(c):
+            x_cur[j] = y[i, j]
+        for s in range(n_sec):
+            b0, b1, b2, a1, a2 = sos[s, 0], sos[s, 1], sos[s, 2], sos[s, 4], sos[s, 5]
+            for j in range(c):
+                x_new = b0 * x_cur[j] + z[s, 0, j]
+                z[s, 0, j] = b1 * x_cur[j] - a1 * x_new + z[s, 1, j]
+                z[s, 1, j] = b2 * x_cur[j] - a2 * x_new
+                x_cur[j] = x_new
+        for j in range(c):
+            y[i, j] = x_cur[j]
+
+
+KERNELS = (_filtfilt,)  # the zero-phase filter's (the rolling fits')
+CAUSAL_KERNELS = (_sosfilt,)  # the causal block filter's (the pipeline's, with or without identification)
 
 
 def lowpass_zero_phase(x: np.ndarray, fs_hz: float, cutoff_hz: float = DEFAULT_CUTOFF_HZ,

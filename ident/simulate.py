@@ -21,6 +21,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit, prange
 from scipy.interpolate import CubicSpline
+from scipy.linalg.lapack import dgtsv as _gtsv
 
 from .library import PolynomialForcingLibrary
 
@@ -247,7 +248,80 @@ def _rk4_lockstep(coefs, parent, var, k_poly, forcing, x0, dt, f_stage, m, bound
     return out, diverged
 
 
-KERNELS = (_rk4_serial, _rk4_parallel, _rk4_lockstep)  # the compiled integration kernels (see kernels_cached)
+def _not_a_knot(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(knots, coefficients (4, n - 1)) of scipy's CubicSpline(x, y) (not-a-knot ends, n >= 4 ascending
+    knots, y 1-D): its own expressions and LAPACK's tridiagonal solver (gtsv, as its solve_banded calls),
+    so the same numbers; scipy's input validation around them cost five times the arithmetic, once per
+    rolling window."""
+    n = x.size
+    dx = np.diff(x)
+    slope = np.diff(y, axis=0) / dx
+    a = np.zeros((3, n))  # banded: upper diagonal, diagonal, lower diagonal
+    b = np.empty(n)
+    a[1, 1:-1] = 2 * (dx[:-1] + dx[1:])
+    a[0, 2:] = dx[:-1]
+    a[-1, :-2] = dx[1:]
+    b[1:-1] = 3 * (dx[1:] * slope[:-1] + dx[:-1] * slope[1:])
+    a[1, 0] = dx[1]
+    a[0, 1] = x[2] - x[0]
+    d = x[2] - x[0]
+    b[0] = ((dx[0] + 2 * d) * dx[1] * slope[0] + dx[0]**2 * slope[1]) / d
+    a[1, -1] = dx[-2]
+    a[-1, -2] = x[-1] - x[-3]
+    d = x[-1] - x[-3]
+    b[-1] = ((dx[-1]**2 * slope[-2] + (2 * d + dx[-1]) * dx[-2] * slope[-1]) / d)
+    _, _, _, s, info = _gtsv(a[2, :-1], a[1, :], a[0, 1:], b.reshape(n, -1), True, True, True, True)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"spline system singular (gtsv info {info})")
+    s = s.reshape(n)
+    t = (s[:-1] + s[1:] - 2 * slope) / dx  # scipy's CubicHermiteSpline from here
+    return x, np.stack((t / dx, (slope - s[:-1]) / dx - t, s[:-1], y[:-1]))
+
+
+@njit(cache=True, nogil=True)
+def _spline_eval(x, c, xs):  # pragma: no cover - compiled
+    """scipy's PPoly evaluation (scipy/interpolate/_ppoly.pyx: evaluate, find_interval_ascending,
+    evaluate_poly1) of the cubic pieces c (4, n - 1) on knots x at the points xs: the interval by its binary
+    search from the previous one (half-open, the last closed, extrapolated beyond the ends), the polynomial
+    as sum_k c[3 - k] s^k with the powers built by products, in that order."""
+    nx = x.shape[0]
+    out = np.empty(xs.shape[0])
+    interval = 0
+    for ip in range(xs.shape[0]):
+        xval = xs[ip]
+        if not (x[0] <= xval <= x[nx - 1]):
+            interval = 0 if xval < x[0] else nx - 2  # (NaN cannot reach here: checked by the caller)
+        elif xval == x[nx - 1]:
+            interval = nx - 2
+        else:
+            if xval >= x[interval]:
+                low, high = interval, nx - 2
+            else:
+                low, high = 0, interval
+            if xval < x[low + 1]:
+                high = low
+            while low < high:
+                mid = (high + low) // 2
+                if xval < x[mid]:
+                    high = mid
+                elif xval >= x[mid + 1]:
+                    low = mid + 1
+                else:
+                    low = mid
+                    break
+            interval = low
+        sv = xval - x[interval]
+        res = 0.0
+        z = 1.0
+        for kp in range(4):
+            res = res + c[3 - kp, interval] * z
+            if kp < 3:
+                z *= sv
+        out[ip] = res
+    return out
+
+
+KERNELS = (_rk4_serial, _rk4_parallel, _rk4_lockstep, _spline_eval)  # the compiled integration kernels (see kernels_cached)
 
 
 def kernels_cached(kernels=KERNELS) -> bool | None:
@@ -282,7 +356,10 @@ def _forcing_stages(t: np.ndarray, forcing: np.ndarray, m: int) -> np.ndarray:
     dt = np.diff(t)
     frac = np.arange(2 * m) / (2 * m)
     t_stage = (t[:-1, None] + dt[:, None] * frac[None]).ravel()
-    f_stage = CubicSpline(t, forcing)(t_stage).reshape(t.size - 1, 2 * m)
+    if t.size >= 4 and np.all(dt > 0):
+        f_stage = _spline_eval(*_not_a_knot(t, forcing), t_stage).reshape(t.size - 1, 2 * m)
+    else:
+        f_stage = CubicSpline(t, forcing)(t_stage).reshape(t.size - 1, 2 * m)
     f_stage = np.ascontiguousarray(np.concatenate([f_stage, forcing[1:, None]], axis=1))
     if len(_STAGE_CACHE) >= 8:
         _STAGE_CACHE.pop(next(iter(_STAGE_CACHE)))

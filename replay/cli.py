@@ -158,7 +158,7 @@ def play_cmd(args) -> int:
                 print(f"{e['t']:9.2f} s  regime {e['regime']}{start}", flush=True)
 
     try:
-        compile_s = 0.0 if args.no_identify else compile_kernels()  # before the clock starts: no window waits
+        compile_s = compile_kernels(identify=not args.no_identify)  # before the clock starts: no window waits
         cpu0 = time.process_time()
         rep = play(samples, rate=None if args.max else args.rate, start_s=args.start, duration_s=args.duration,
                    loop=args.loop, identify=not args.no_identify, on_step=on_step, stop=lambda: stopped[0],

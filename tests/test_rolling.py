@@ -12,10 +12,9 @@ from ident.filters import design_highpass
 from ident.physical import integrate_band
 from daq.sim.rig import RigConfig, simulate_rig
 from ident.rig import RigParams
-from ident.ensemble import KERNELS as ENSEMBLE_KERNELS
-from ident.live.pipeline import warm_up
+from ident.live.pipeline import IDENTIFY_KERNELS, MONITOR_KERNELS, warm_up
+from ident.live.regimes import RegimeConfig, RegimeMonitor
 from ident.live.rolling import RollingConfig, RollingIdentifier
-from ident.simulate import KERNELS as INTEGRATION_KERNELS
 from daq.sim.sensors import to_counts
 
 
@@ -112,9 +111,11 @@ def test_uncertainty_and_backbone(linear_rig_fits):
 
 
 def test_warm_up_compiles_the_kernels_the_fits_run(linear_rig_fits):
-    """One compiled signature per kernel, the one warm_up compiles: the fits (sweeps, refinements, ensembles)
-    ran before, and a second signature (a read-only array is one) would have been compiled in mid-stream,
-    stalling the first refinement for seconds."""
+    """One compiled signature per kernel, the one warm_up compiles: the fits (filters, integration, sweeps,
+    refinements, ensembles) ran before, and a second signature (a read-only array is one) would have been
+    compiled in mid-stream, stalling the first refinement for seconds. The regime monitor's kernels too:
+    warm_up compiles them whether or not the identification runs."""
+    RegimeMonitor(RegimeConfig()).step(linear_rig_fits[2][:4000])
     warm_up()
-    assert {k.__name__: len(k.signatures) for k in INTEGRATION_KERNELS + ENSEMBLE_KERNELS} == {
-        k.__name__: 1 for k in INTEGRATION_KERNELS + ENSEMBLE_KERNELS}
+    kernels = MONITOR_KERNELS + IDENTIFY_KERNELS
+    assert {k.__name__: len(k.signatures) for k in kernels} == {k.__name__: 1 for k in kernels}

@@ -56,3 +56,23 @@ def test_bad_arguments():
         simulate(lib, c, [np.nan, 0], t, np.zeros(11))
     with pytest.raises(ValueError, match="shape"):
         simulate(lib, np.zeros((3, 2)), [0, 0], t, np.zeros(11))
+
+
+def test_forcing_stages_are_scipys_cubic_spline():
+    """The forcing at the RK4 stages is scipy's not-a-knot CubicSpline through the samples, bit for bit
+    (uneven spacing, two and three sub-steps, points beyond the ends extrapolated as scipy does)."""
+    from scipy.interpolate import CubicSpline
+
+    from ident.simulate import _forcing_stages, _not_a_knot, _spline_eval
+
+    rng = np.random.default_rng(5)
+    t = np.cumsum(rng.uniform(0.002, 0.01, size=300))
+    f = np.sin(40 * t) + 0.1 * rng.normal(size=t.size)
+    for m in (1, 2, 3):
+        frac = np.arange(2 * m) / (2 * m)
+        ts = (t[:-1, None] + np.diff(t)[:, None] * frac[None]).ravel()
+        stages = _forcing_stages(t, f, m)
+        np.testing.assert_array_equal(stages[:, :-1].ravel(), CubicSpline(t, f)(ts))
+        np.testing.assert_array_equal(stages[:, -1], f[1:])
+    beyond = np.array([t[0] - 0.05, t[-1], t[-1] + 0.05])
+    np.testing.assert_array_equal(_spline_eval(*_not_a_knot(t, f), beyond), CubicSpline(t, f)(beyond))

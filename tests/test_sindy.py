@@ -3,7 +3,7 @@ import pytest
 
 from ident.paper.duffing import DuffingParams, coefficient_errors
 from ident.library import PolynomialForcingLibrary
-from ident.sindy import identify, refine, sweep
+from ident.sindy import identify, integration_errors, refine, sweep
 
 
 def test_table1_clean_duffing_coefficients_within_1e6(duffing):
@@ -62,3 +62,19 @@ def test_bad_input_raises_a_clear_value_error(duffing, mutate, match):
     x, d, t, f = mutate(duffing.x, duffing.xdot, duffing.t, duffing.forcing)
     with pytest.raises(ValueError, match=match):
         identify(x, d, t, f)
+
+
+@pytest.mark.parametrize("n_states", [1, 2, 3, 9])
+def test_integration_errors_of_offset_trajectories(n_states):
+    """A trajectory off by a constant c_j in each state has NRMSE mean_j(|c_j| / std_j) exactly in real
+    numbers; a diverged one (NaN) has inf. Both the compiled path (two to seven states) and numpy's."""
+    rng = np.random.default_rng(n_states)
+    x = rng.normal(size=(500, n_states)) * rng.uniform(0.1, 10.0, size=n_states)
+    c = rng.normal(size=(4, n_states))
+    sim = x[None] + c[:, None, :]
+    sim[3, 200:] = np.nan
+    err = integration_errors(sim, x)
+    expected = np.mean(np.abs(c) / x.std(axis=0), axis=1)
+    np.testing.assert_allclose(err[:3], expected[:3], rtol=1e-12)
+    assert err[3] == np.inf
+    np.testing.assert_array_equal(integration_errors(sim, x, x.std(axis=0)), err)

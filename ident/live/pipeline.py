@@ -18,12 +18,14 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..ensemble import KERNELS as ENSEMBLE_KERNELS, block_bootstrap
-from ..filters import design_lowpass, lowpass_block, lowpass_start
+from ..filters import CAUSAL_KERNELS, KERNELS as FILTER_KERNELS, design_lowpass, lowpass_block, lowpass_start
 from ..library import PolynomialForcingLibrary
+from ..physical import KERNELS as PHYSICAL_KERNELS
 from ..simulate import KERNELS as INTEGRATION_KERNELS, PARALLEL_MIN_WORK, simulate
+from ..sindy import KERNELS as SINDY_KERNELS, integration_errors
 from ..simulate import kernels_cached as _cached
-from .regimes import RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow
-from .rolling import RollingConfig, RollingIdentifier, WindowFit
+from .regimes import KERNELS as REGIME_KERNELS, RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow
+from .rolling import RollingConfig, RollingIdentifier, WindowFit, window_coordinates
 
 
 @dataclass(frozen=True)
@@ -88,16 +90,28 @@ def model_records(fit: WindowFit) -> list[dict]:
     return out
 
 
-def kernels_cached() -> bool | None:
-    """Whether numba's disk cache holds every kernel ``warm_up`` compiles (None: cannot tell)."""
-    return _cached(INTEGRATION_KERNELS + ENSEMBLE_KERNELS)
+MONITOR_KERNELS = CAUSAL_KERNELS + REGIME_KERNELS  # the causal filter's and the regime monitor's (always run)
+IDENTIFY_KERNELS = (INTEGRATION_KERNELS + SINDY_KERNELS + ENSEMBLE_KERNELS + FILTER_KERNELS
+                    + PHYSICAL_KERNELS)  # ... the rolling fits run
 
 
-def warm_up() -> None:
-    """Compile the numba kernels the rolling identification uses (RK4 integration: serial, lockstep, parallel;
-    the ensemble's STLSQ), on tiny inputs: numba caches the machine code on disk, so only the first run
-    after an install pays (seconds); callers run this before data flows so that no window waits for the
-    compiler."""
+def kernels_cached(identify: bool = True) -> bool | None:
+    """Whether numba's disk cache holds every kernel ``warm_up(identify)`` compiles (None: cannot tell)."""
+    return _cached(MONITOR_KERNELS + (IDENTIFY_KERNELS if identify else ()))
+
+
+def warm_up(identify: bool = True) -> None:
+    """Compile the numba kernels the pipeline uses, on tiny inputs: the causal filter's and the regime
+    monitor's always, and with ``identify`` the rolling identification's (the window's filters and integration; RK4
+    integration: serial, lockstep, parallel; integration errors; the ensemble's STLSQ). numba caches the machine code on disk,
+    so only the first run after an install pays (seconds); loading even a cached kernel costs a moment the
+    first time in a process (a tenth of a second for the first), so callers run this before data flows and
+    no window waits for the compiler or the loader."""
+    lowpass_block(lowpass_start(design_lowpass(64.0, 10.0), 3), np.zeros((8, 3)))
+    RegimeMonitor(RegimeConfig(fs_hz=64.0)).step(np.zeros((64, 3)))  # two windows of 32 samples
+    if not identify:
+        return
+    window_coordinates(np.zeros((1600, 3)), RollingConfig(fs_hz=400.0, fs_ident_hz=200.0))
     lib = PolynomialForcingLibrary(2, 3, True, ("z", "v"))
     coefs = np.zeros((lib.n_terms, 2))
     coefs[lib.names.index("v"), 0] = 1.0
@@ -106,7 +120,8 @@ def warm_up() -> None:
     simulate(lib, coefs, np.zeros(2), t, np.zeros_like(t))
     simulate(lib, np.stack([coefs, 2 * coefs]), np.zeros(2), t, np.zeros_like(t))  # one pattern: lockstep
     n_batch = PARALLEL_MIN_WORK // (len(t) - 1) + 1
-    simulate(lib, np.repeat(coefs[None], n_batch, axis=0), np.zeros(2), t, np.zeros_like(t))
+    sim = simulate(lib, np.repeat(coefs[None], n_batch, axis=0), np.zeros(2), t, np.zeros_like(t))
+    integration_errors(sim.x, np.ones((len(t), 2)))
     block_bootstrap(np.eye(4), np.ones((4, 2)), 0.5, n_models=2, n_blocks=2)
 
 

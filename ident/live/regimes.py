@@ -64,16 +64,20 @@ stream into blocks gives the same output (tests/test_regimes.py proves it).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
+import scipy.fft
+from numba import njit
 
 LABELS = ("linear", "localized-1", "localized-2", "impacting-both")
 PEAK_HARMONICS = 8  # harmonics of the drive in the reconstructed displacement waveform
 LEARNED_CAP = 1.5  # largest log-odds a learned gap may give
 LEARN_WINDOWS = 400  # confident windows kept per beam for the learned gap and stiffness (100 s at 0.25 s)
 FLOOR_QUANTILE = 0.2
+_FLOOR_NORM = -np.log(1 - FLOOR_QUANTILE)  # a white floor's mean power over its quantile
 
 
 def label_of(hit1: bool, hit2: bool) -> str:
@@ -238,7 +242,7 @@ def regime_step(state: RegimeState, block: np.ndarray) -> tuple[RegimeState, lis
     cfg = state.cfg
     n_win = int(round(cfg.window_s * cfg.fs_hz))
     n_hop = max(1, int(round(cfg.hop_s * cfg.fs_hz)))
-    windows, changes = [], []
+    done = []  # (samples, samples seen at its end) of every window the block completes
     buf, since, n_seen = state.buf, state.since_hop, state.n_seen
     i = 0
     while i < len(x):
@@ -250,11 +254,15 @@ def regime_step(state: RegimeState, block: np.ndarray) -> tuple[RegimeState, lis
         if since == n_hop:
             since = 0
             if len(buf) == n_win:
-                state = replace(state, buf=buf, since_hop=since, n_seen=n_seen)
-                state, w, ch = _window(state, buf, n_seen / cfg.fs_hz)
-                windows.append(w)
-                if ch is not None:
-                    changes.append(ch)
+                done.append((buf, n_seen))
+    windows, changes = [], []
+    if done:  # the spectra depend on the samples alone: all of the block's windows at once
+        spectra = spectral_batch(np.stack([b for b, _ in done]), cfg.fs_hz, cfg.min_frequency_hz)
+        for (_, end), sp in zip(done, spectra):
+            state, w, ch = _window(state, sp, end / cfg.fs_hz)
+            windows.append(w)
+            if ch is not None:
+                changes.append(ch)
     state = replace(state, buf=buf, since_hop=since, n_seen=n_seen)
     return state, windows, changes
 
@@ -290,72 +298,212 @@ class _Spectral:
 
 
 @lru_cache(maxsize=16)
-def _window_arrays(n: int, fs_hz: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """Hann window, sample times and the window's power normalisation, per window length and rate."""
+def _window_arrays(n: int, fs_hz: float) -> tuple[np.ndarray, np.ndarray, float, np.float64]:
+    """Hann window, sample times, the window's power normalisation and its sum, per window length and rate."""
     w = np.hanning(n)
-    return w, np.arange(n) / fs_hz, float(np.sum(w**2))
+    return w, np.arange(n) / fs_hz, float(np.sum(w**2)), w.sum()
 
 
 def spectral_features(x: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) -> _Spectral:
     """Drive frequency, phasors and band powers of one window (n, 3)."""
-    n = len(x)
-    w, t, w2 = _window_arrays(n, float(fs_hz))
-    x = x - x.mean(axis=0)
-    xw = x * w[:, None]
+    return spectral_batch(np.asarray(x, float)[None], fs_hz, min_frequency_hz)[0]
+
+
+def spectral_batch(xs: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) -> list[_Spectral]:
+    """``spectral_features`` of W windows (W, n, 3) at once (a block's windows: one FFT, one call per kernel).
+
+    The element-wise work around the FFT (removing the mean and windowing, the power spectrum, its
+    peak, the band sums and the floor's order statistic) runs in compiled kernels (``_windowed``,
+    ``_power``, ``_bands``) that reproduce numpy's order of operations; the FFT is scipy's (numpy's
+    pocketfft numbers, faster on a batch of rows), the harmonics' basis and its product with the window
+    numpy's. The features are bit for bit those of the plain per-window numpy expressions the monitor had
+    (every window of ``daq bench --regimes``' cached cases and of the recordings was checked); in numpy,
+    one window at a time, they took half the monitor's time in calls on small arrays.
+    """
+    xs = np.require(xs, float, "CW")  # one compiled signature
+    n_w, n = xs.shape[0], xs.shape[1]
+    w, t, w2, w_sum = _window_arrays(n, float(fs_hz))
+    xw = _windowed(xs, w)  # (W, 3, n): channels in rows, for the FFT
     pad = 4
     nfft = pad * n
-    spec = np.fft.rfft(xw, nfft, axis=0)
-    p = spec.real**2 + spec.imag**2
+    spec = scipy.fft.rfft(xw, nfft, axis=-1)
     df = fs_hz / nfft
     top = 0.3 * fs_hz
     lo = int(np.ceil(min_frequency_hz / df))
     hi = max(lo + 1, int(top / df))
-    k = lo + int(np.argmax(p[lo:hi, 0]))
-    delta = 0.0
-    if 0 < k < p.shape[0] - 1:  # parabolic interpolation of the log peak
-        a, b, c = np.log(p[k - 1:k + 2, 0] + 1e-300)
-        den = a - 2 * b + c
-        if den < 0:
-            delta = 0.5 * (a - c) / den
-    f = float((k + delta) * df)
-    n_h = max(1, min(PEAK_HARMONICS, int(0.45 * fs_hz / f))) if f > 0 else 1
-    basis = np.empty((n_h, n), complex)  # exp(-2 pi i n f t), n = 1 .. H, by products of the fundamental's
-    basis[0] = np.exp(-2j * np.pi * f * t)
-    for h in range(1, n_h):
-        np.multiply(basis[h - 1], basis[0], out=basis[h])
-    harmonics = 2 * (basis @ xw) / w.sum()
-    phasors = harmonics[0]
-
-    def index(freq_hz: float) -> int:  # first bin at or above freq_hz
-        return min(p.shape[0], int(np.ceil(freq_hz / df - 1e-9)))
-
-    i_f, i_h, i_i, i_top = index(0.5 * f), index(1.5 * f), index(min(10.5 * f, top)), index(top)
-    i_i = max(i_h, i_i)
-    fund = p[i_f:i_h].sum(axis=0)
-    harm = p[i_h:i_i].sum(axis=0)
-    imp = p[i_i:i_top].sum(axis=0)
-    odd = np.zeros(3)
-    n_odd = 0
-    for m in (3, 5):
-        a0, a1 = max(index((m - 0.25) * f), i_h), min(index((m + 0.25) * f), i_i)
-        if a1 > a0:
-            odd += p[a0:a1].sum(axis=0)
-            n_odd += a1 - a0
-    band = p[i_h:i_top]
-    floor = _low_quantile(band, FLOOR_QUANTILE) / -np.log(1 - FLOOR_QUANTILE) if len(band) else np.zeros(3)
+    if lo >= spec.shape[-1]:
+        raise ValueError(f"min_frequency_hz {min_frequency_hz} lies above the Nyquist frequency {fs_hz / 2}")
+    p, peaks = _power(spec, lo, hi)  # (W, 3, nfft / 2 + 1) and each window's base peak bin in [lo, hi)
+    fs_ = []
+    for q in range(n_w):
+        k = int(peaks[q])
+        delta = 0.0
+        if 0 < k < p.shape[-1] - 1:  # parabolic interpolation of the log peak
+            a, b, c = np.log(p[q, 0, k - 1:k + 2] + 1e-300)
+            den = a - 2 * b + c
+            if den < 0:
+                delta = 0.5 * (a - c) / den
+        fs_.append(float((k + delta) * df))
+    f = np.array(fs_)
+    n_hs = [max(1, min(PEAK_HARMONICS, int(0.45 * fs_hz / fq))) if fq > 0 else 1 for fq in fs_]
+    basis = np.empty((n_w, max(n_hs), n), complex)  # exp(-2 pi i h f t), h = 1 .. H, by products of the fundamental's
+    basis[:, 0] = np.exp(-2j * np.pi * f[:, None] * t)
+    for h in range(1, basis.shape[1]):
+        np.multiply(basis[:, h - 1], basis[:, 0], out=basis[:, h])
+    fund, harm, imp, odd, low, bins = _bands(p, f, df, top, FLOOR_QUANTILE)
+    floor = low / _FLOOR_NORM  # (zero where the bands are empty)
     scale = 2.0 / (n * w2 * pad)
-    return _Spectral(f, phasors, harmonics, fund, harm, odd, imp, (i_i - i_h, n_odd, i_top - i_i), floor, scale)
+    out = []
+    for q in range(n_w):
+        harmonics = 2 * (basis[q, :n_hs[q]] @ xw[q].T) / w_sum
+        out.append(_Spectral(fs_[q], harmonics[0], harmonics, fund[q], harm[q], odd[q], imp[q],
+                             (int(bins[q, 0]), int(bins[q, 1]), int(bins[q, 2])), floor[q], scale))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _windowed(xs, w):  # pragma: no cover - compiled
+    """(x - x.mean(axis=0)) * w[:, None] of every window x in xs (W, n, c), transposed to (W, c, n): numpy's
+    axis-0 mean of a C-contiguous array adds the rows in order and divides by n, which is what this does."""
+    n_w, n, c = xs.shape
+    out = np.empty((n_w, c, n))
+    m = np.empty(c)
+    for q in range(n_w):
+        m[:] = 0.0
+        for i in range(n):
+            for j in range(c):
+                m[j] += xs[q, i, j]
+        for j in range(c):
+            m[j] = m[j] / n
+        for i in range(n):
+            for j in range(c):
+                out[q, j, i] = (xs[q, i, j] - m[j]) * w[i]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _power(spec, lo, hi):  # pragma: no cover - compiled
+    """(|spec|^2 as re^2 + im^2 of spec (W, c, bins), per window the first bin of the largest power of row 0
+    in [lo, hi), as np.argmax)."""
+    n_w, c, nb = spec.shape
+    p = np.empty((n_w, c, nb))
+    peaks = np.empty(n_w, np.int64)
+    for q in range(n_w):
+        for j in range(c):
+            for i in range(nb):
+                v = spec[q, j, i]
+                p[q, j, i] = v.real * v.real + v.imag * v.imag
+        k = lo
+        for i in range(lo, min(hi, nb)):
+            if p[q, 0, i] > p[q, 0, k]:
+                k = i
+        peaks[q] = k
+    return p, peaks
+
+
+@njit(cache=True, nogil=True)
+def _first_bin(freq_hz, df, n_bins):  # pragma: no cover - compiled
+    """The first bin at or above freq_hz (at most n_bins)."""
+    return min(n_bins, int(np.ceil(freq_hz / df - 1e-9)))
+
+
+@njit(cache=True, nogil=True)
+def _bands(p, f, df, top, quantile):  # pragma: no cover - compiled
+    """The band powers of ``_Spectral`` per window q and row of p (W, c, bins; bins df apart), f[q] the
+    window's drive frequency: sums over [0.5 f, 1.5 f), [1.5 f, 10.5 f), [10.5 f, top) and within f / 4 of
+    3 f and 5 f (each added bin by bin from its first, as numpy's sum along the rows' axis); the
+    ``quantile`` (lower order statistic) of the bins in [1.5 f, top) (exact whatever the selection
+    algorithm; zero if there are none); the bins in the harmonic band, at the odd harmonics and in the
+    impact band."""
+    n_w, c, nb = p.shape
+    fund, harm, imp = np.zeros((n_w, c)), np.zeros((n_w, c)), np.zeros((n_w, c))
+    odd, low = np.zeros((n_w, c)), np.zeros((n_w, c))
+    bins = np.zeros((n_w, 3), np.int64)
+    for q in range(n_w):
+        fq = f[q]
+        i_f, i_h = _first_bin(0.5 * fq, df, nb), _first_bin(1.5 * fq, df, nb)
+        i_i, i_top = _first_bin(min(10.5 * fq, top), df, nb), _first_bin(top, df, nb)
+        i_i = max(i_h, i_i)
+        n_odd = 0
+        for m in (3, 5):
+            a0 = max(_first_bin((m - 0.25) * fq, df, nb), i_h)
+            a1 = min(_first_bin((m + 0.25) * fq, df, nb), i_i)
+            if a1 > a0:
+                n_odd += a1 - a0
+                for j in range(c):
+                    part = 0.0
+                    for i in range(a0, a1):
+                        part += p[q, j, i]
+                    odd[q, j] += part
+        r = min(i_top - i_h - 1, int(quantile * (i_top - i_h - 1)))
+        for j in range(c):
+            for i in range(i_f, i_h):
+                fund[q, j] += p[q, j, i]
+            for i in range(i_h, i_i):
+                harm[q, j] += p[q, j, i]
+            for i in range(i_i, i_top):
+                imp[q, j] += p[q, j, i]
+            if i_top > i_h:
+                low[q, j] = _kth(p[q, j, i_h:i_top], r)
+        bins[q, 0], bins[q, 1], bins[q, 2] = i_i - i_h, n_odd, i_top - i_i
+    return fund, harm, imp, odd, low, bins
 
 
 def _low_quantile(a: np.ndarray, q: float) -> np.ndarray:
-    """The q-quantile (lower order statistic) of each column, by partition (cheaper than np.quantile)."""
+    """The q-quantile (lower order statistic) of each column of a (n, c), or of a (n,): the k-th smallest
+    (k = int(q (n - 1))), an order statistic, so the same number whichever way it is found; a compiled
+    selection (``_column_kth``) costs a fraction of np.partition's call on these few hundred numbers."""
     k = min(len(a) - 1, int(q * (len(a) - 1)))
-    return np.partition(a, k, axis=0)[k]
+    return _column_kth(a, k) if a.ndim == 2 else _column_kth(a[:, None], k)[0]
+
+
+@njit(cache=True, nogil=True)
+def _column_kth(a, k):  # pragma: no cover - compiled
+    """The k-th smallest value of each column of a (n, c)."""
+    out = np.empty(a.shape[1])
+    for j in range(a.shape[1]):
+        out[j] = _kth(a[:, j], k)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _kth(a, k):  # pragma: no cover - compiled
+    """The k-th smallest value of a (n,), a left as it is. Above 256 values the search is narrowed first
+    (Floyd and Rivest's idea): a sorted sample of every (n // 63)-th value brackets the k-th, one pass counts
+    the values below the bracket and gathers those inside it (without branches), and only these few are
+    partitioned; should the bracket miss (it cannot be wrong, only unlucky), the whole array is. The
+    spectra's floors select among a thousand bins per channel, where a partition of all of them spent
+    most of its time on mispredicted branches."""
+    n = a.shape[0]
+    if n < 256:
+        return np.partition(a.copy(), k)[k]
+    s = np.sort(a[::max(1, n // 63)])
+    r = k * s.shape[0] // n
+    lo, hi = s[max(0, r - 3)], s[min(s.shape[0] - 1, r + 4)]
+    inside = np.empty(n)
+    below = 0
+    m = 0
+    for i in range(n):
+        v = a[i]
+        below += v < lo
+        inside[m] = v
+        m += (v >= lo) & (v <= hi)
+    if below <= k < below + m:
+        return np.partition(inside[:m], k - below)[k - below]
+    return np.partition(a.copy(), k)[k]
+
+
+KERNELS = (_windowed, _power, _bands, _column_kth)  # the monitor's compiled kernels (ident.live.pipeline.warm_up)
 
 
 def _clip(v: float, lo: float, hi: float) -> float:
     """np.clip for one number (NaN stays NaN), without numpy's per-call overhead on scalars."""
     return float(min(max(v, lo), hi))
+
+
+def _angle_deg(q: complex) -> float:
+    """np.degrees(np.angle(q)) for one number (np.angle's arctan2, without its conversions)."""
+    return float(np.degrees(np.arctan2(q.imag, q.real)))
 
 
 def _logistic(s: float) -> float:
@@ -373,9 +521,9 @@ def _evidence(power: float, noise: float, fund: float, cfg: RegimeConfig) -> tup
     return ratio, _clip(np.log10(max(hidden, 1e-12) / cfg.distortion_on) / cfg.distortion_scale, -3, 0), False
 
 
-def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeState, RegimeWindow, RegimeChange | None]:
+def _window(state: RegimeState, sp: _Spectral, t_end: float) -> tuple[RegimeState, RegimeWindow, RegimeChange | None]:
+    """One window's features, evidence and decision from its spectrum and what the stream has taught."""
     cfg = state.cfg
-    sp = spectral_features(x, cfg.fs_hz, cfg.min_frequency_hz)
     f = sp.f_hz
     omega = 2 * np.pi * f
     base = sp.phasors[0]
@@ -384,15 +532,17 @@ def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeStat
     floors = np.vstack([state.floors, sp.floor[None, :]])[-LEARN_WINDOWS:]
     floor = np.minimum(sp.floor, _low_quantile(floors, 0.1))  # sensor noise: stationary, the quiet windows'
     nh, nodd, ni = sp.bins
+    # the band powers as Python floats: the same arithmetic as on numpy's scalars, at a fraction of the cost
+    fl, harm, imp, fund_, odd_ = (a.tolist() for a in (floor, sp.harmonic, sp.impact, sp.fundamental, sp.odd))
     # what the base's own distortion would put into a tip (transmissibility above resonance <= about 1)
-    base_h = max(0.0, float(sp.harmonic[0] - floor[0] * nh))
-    base_i = max(0.0, float(sp.impact[0] - floor[0] * ni))
+    base_h = max(0.0, harm[0] - fl[0] * nh)
+    base_i = max(0.0, imp[0] - fl[0] * ni)
     beams, probs = [], []
     free_z, hit_z, free_w = list(state.free_z), list(state.hit_z), list(state.free_w)
     zs = []
     # excess powers of both tips above the floor, the base's share removed
-    ex_h = np.array([float(sp.harmonic[j] - floor[j] * nh) - base_h for j in (1, 2)])
-    ex_i = np.array([float(sp.impact[j] - floor[j] * ni) - base_i for j in (1, 2)])
+    ex_h = [harm[j] - fl[j] * nh - base_h for j in (1, 2)]
+    ex_i = [imp[j] - fl[j] * ni - base_i for j in (1, 2)]
     for i in range(2):
         j = 1 + i
         o = 1 - i
@@ -400,17 +550,17 @@ def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeStat
         rel = tip - base
         z = float(abs(rel) / omega**2) if omega > 0 else 0.0
         zs.append(z)
-        w2 = omega**2 * float(np.real(tip / rel)) if abs(rel) > 0 else float("nan")
-        fn = float(np.sqrt(w2) / (2 * np.pi)) if w2 > 0 else float("nan")
-        phase = float(np.degrees(np.angle(tip / base))) if abs(base) > 0 else float("nan")
-        fund = max(float(sp.fundamental[j]), 1e-300)
+        w2 = omega**2 * float((tip / rel).real) if abs(rel) > 0 else float("nan")
+        fn = math.sqrt(w2) / (2 * np.pi) if w2 > 0 else float("nan")
+        phase = _angle_deg(tip / base) if abs(base) > 0 else float("nan")
+        fund = max(fund_[j], 1e-300)
         # what the other beam's distortion puts into this one through the coupling
         own_h = ex_h[i] - cfg.cross_talk * max(ex_h[o], 0.0)
         own_i = ex_i[i] - cfg.cross_talk_impact * max(ex_i[o], 0.0)
-        noise_h, noise_i = float(floor[j]) * nh, float(floor[j]) * ni
+        noise_h, noise_i = fl[j] * nh, fl[j] * ni
         d_h, e_h, sig_h = _evidence(own_h, noise_h, fund, cfg)
         d_i, e_i, sig_i = _evidence(own_i, noise_i, fund, cfg) if ni else (0.0, -3.0, False)
-        odd = (float(sp.odd[j]) - float(floor[j]) * nodd) / fund
+        odd = (odd_[j] - fl[j] * nodd) / fund
         e_d = max(e_h, e_i)
         significant = sig_h or sig_i
         distortion = max(d_h, 0.0) + max(d_i, 0.0)
@@ -433,9 +583,9 @@ def _window(state: RegimeState, x: np.ndarray, t_end: float) -> tuple[RegimeStat
             hit_z[i] = np.append(hit_z[i], z)[-LEARN_WINDOWS:]
         elif e_d <= -2.0 and fund > 10 * noise_h:
             free_z[i] = np.append(free_z[i], z)[-LEARN_WINDOWS:]
-            if np.isfinite(fn):
+            if math.isfinite(fn):
                 free_w[i] = np.append(free_w[i], 2 * np.pi * fn)[-LEARN_WINDOWS:]
-        impact_rms = float(np.sqrt(max(d_i, 0.0) * fund * sp.power_scale))
+        impact_rms = math.sqrt(max(d_i, 0.0) * fund * sp.power_scale)
         beams.append((p, max(p, 1 - p), z, peak, gap, distortion, odd, max(d_i, 0.0), significant,
                       fn, f_free, phase, signs[i], (e_d, e_a, e_k), impact_rms))
     decision, changed = decide(state.decision, (probs[0], probs[1]), cfg)
