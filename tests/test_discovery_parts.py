@@ -46,6 +46,24 @@ def test_integrator_matches_an_independent_duffing_solution_and_converges_at_sec
     assert substeps_for(model, fs, np.abs(ref).max(), 1.0) >= 2
 
 
+def test_a_joint_that_never_slips_adds_nothing_from_a_displaced_start():
+    # the element is the Iwan force minus its stuck stiffness, which the linear model already holds: a
+    # joint whose motion stays below its weakest slider's slip must leave the response as it is. A
+    # simulation (every held-out block's) starts from a displaced, moving state; sliders set to that
+    # displacement had left a constant force of -k z0 on the strong ones for the whole block
+    lin, m, w, zeta = _sdof()
+    fs, n = 500.0, 2000
+    w0 = np.array([2e-3 * (1 / (2 * lin.C[0, 0]))])  # displacement 2 mm from rest at the start, free decay
+    free = simulate(lin, np.zeros(n), fs, [(0, 0)], w0=w0)[:, 0]
+    z0 = free[0]
+    assert abs(z0) == pytest.approx(2e-3, rel=1e-9)
+    p = law_parameters(CAUSES["hysteretic_joint"], {"slip": 40 * abs(z0)}) * np.array([0.5 * m * w * w, 1, 1, 1])
+    joint = lin.with_elements((Element(JOINT, p, lin.C[0], np.array([1.0 + 0j])),))
+    assert 40 * abs(z0) * 0.5 / N_IWAN > abs(z0)  # the weakest slider slips beyond the largest motion
+    y = simulate(joint, np.zeros(n), fs, [(0, 0)], w0=w0)[:, 0]
+    assert np.max(np.abs(y - free)) < 1e-12 * abs(z0)
+
+
 def test_rig_baseline_runs_the_rig_model_as_ident_rig_does():
     p = RigParams().with_beams(gap_pos_m=np.inf, gap_neg_m=np.inf)
     fs = 1000.0

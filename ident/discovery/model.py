@@ -152,9 +152,8 @@ def _simulate(lam, B, cs, cu, ce, codes, P, LZ, G, du, U, w0, dt, substeps, boun
     u0 = U[0].copy()
     u1 = U[0].copy()
     _coords(w, lam, LZ, du, u0, z, v)
-    for e in range(ne):  # the joint starts stuck where it is
-        for i in range(N_IWAN):
-            S[e, i] = z[e]
+    for e in range(ne):  # the joint's springs relaxed at equilibrium, its sliders dragged to where it is
+        slide(codes[e], P[e], z[e], S[e])
     _forces(codes, P, z, v, S, f0)
     for kk in range(n):
         for i in range(k):  # outputs at sample kk
