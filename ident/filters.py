@@ -80,19 +80,19 @@ def _steady_state(sos_bytes: bytes, n_sections: int) -> np.ndarray:
 def zero_phase(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
     """scipy.signal.sosfiltfilt(sos, x, axis=0) (odd extension, default pad length), bit for bit: the
     filter's steady-state initial conditions cached per design and the extension, both passes and the
-    trim in one compiled kernel (``_filtfilt``, scipy's biquad recursion term by term), since the
+    trim in one compiled kernel (``zero_phase_kernel``, scipy's biquad recursion term by term), since the
     rolling fits filter every window anew and scipy's per-call overhead was most of the time."""
     x = np.asarray(x, float)
     sos, zi, pad = zero_phase_setup(sos)
     if x.shape[0] <= pad or x.ndim > 2:
         return sosfiltfilt(sos, x, axis=0)
-    y = _filtfilt(sos, zi, np.require(x.reshape(x.shape[0], -1), requirements="CW"), pad)  # one signature
+    y = zero_phase_kernel(sos, zi, np.require(x.reshape(x.shape[0], -1), requirements="CW"), pad)  # one signature
     return y.reshape(x.shape)
 
 
 def zero_phase_setup(sos: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """(sos as a contiguous float array, its steady-state initial conditions (cached per design), scipy's
-    default pad length): what ``_filtfilt`` takes."""
+    default pad length): what ``zero_phase_kernel`` takes."""
     sos = np.ascontiguousarray(sos, float)
     n_sec = sos.shape[0]
     pad = 3 * (2 * n_sec + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum())))
@@ -100,7 +100,7 @@ def zero_phase_setup(sos: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
 
 
 @njit(cache=True, nogil=True)
-def _filtfilt(sos, zi, x, pad):  # pragma: no cover - compiled
+def zero_phase_kernel(sos, zi, x, pad):  # pragma: no cover - compiled
     """sosfiltfilt along axis 0 of x (n, channels) with the odd extension of ``pad`` samples at each end and
     the steady-state initial conditions zi (n_sections, 2) scaled by the first sample of each pass; every
     operation in scipy's order (``_biquads``), so the output is identical."""
@@ -159,7 +159,7 @@ def _biquads(sos, z, y, forward):  # pragma: no cover - compiled
             y[i, j] = x_cur[j]
 
 
-KERNELS = (_filtfilt,)  # the zero-phase filter's (the rolling fits')
+KERNELS = (zero_phase_kernel,)  # the zero-phase filter's (the rolling fits')
 CAUSAL_KERNELS = (_sosfilt,)  # the causal block filter's (the pipeline's, with or without identification)
 
 

@@ -27,7 +27,7 @@ from .result import Discovery
 from .search import (Candidate, Scoring, Selection, Settings, baseline_residual, block_errors, choose,
                      clipping_candidates, gain_candidates, offset_findings, paired_p, predict, refine, regress, score, significant)
 from .signals import Measurement, Prepared, modal_band, prepare
-from .split import Split, blocks_reached, given, interleaved, transients
+from .split import Split, blocks_reached, given, interleaved, rows_of, transients
 
 
 PIECE_PERIODS = 5  # periods of the slowest mode per piece of the paired test
@@ -51,9 +51,8 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
     split0 = _split(prep0, None if fit_data else train, None if fit_data else test)
     segs = split0.blocks if fit_data else split0.train
     check = segs[2::3] if len(segs) >= 3 else ()
-    rows0 = np.concatenate([np.arange(s.start, s.stop) for s in segs if s not in check])
-    first = ModalBaseline.fit(prep0, rows0,
-                              check=np.concatenate([np.arange(s.start, s.stop) for s in check]) if check else None)
+    first = ModalBaseline.fit(prep0, rows_of([s for s in segs if s not in check]),
+                              check=rows_of(check) if check else None)
     light = structural(first.model.poles, prep0)
     if not np.any(light):
         raise ValueError("no lightly damped mode in the data: nothing resonates in the band "
@@ -113,7 +112,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     for seg in split.blocks:
         resid_all[seg] = prep.measured[seg] - predict(baseline, baseline.model, prep, seg, warm)
     period = max(4, int(prep.fs_hz / f_min))
-    rows = np.concatenate([np.arange(s.start, s.stop) for s in split.blocks])
+    rows = rows_of(split.blocks)
     # a blow's transient dies out within five time constants of the least damped mode (at most 10 s)
     decay = 1.0 / np.maximum(-baseline.model.poles.real, 1e-9)
     settle = max(warm, int(min(5 * float(decay.max()), 10.0) * prep.fs_hz))

@@ -22,6 +22,11 @@ N_BLOCKS = 20
 MIN_BLOCKS = 5
 
 
+def rows_of(segs) -> np.ndarray:
+    """The sample indices of the segments (slices), in order."""
+    return np.concatenate([np.arange(s.start, s.stop) for s in segs]) if segs else np.zeros(0, int)
+
+
 @dataclass(frozen=True)
 class Split:
     blocks: tuple[slice, ...]
@@ -37,8 +42,7 @@ class Split:
         return tuple(b for k, b in enumerate(self.blocks) if k in self.held_out and k not in self.excluded)
 
     def rows(self, which: str) -> np.ndarray:
-        segs = self.train if which == "train" else self.test
-        return np.concatenate([np.arange(s.start, s.stop) for s in segs]) if segs else np.zeros(0, int)
+        return rows_of(self.train if which == "train" else self.test)
 
     def without(self, excluded) -> "Split":
         return Split(self.blocks, self.held_out, tuple(sorted(set(self.excluded) | set(excluded))))

@@ -21,9 +21,8 @@ from ..ensemble import KERNELS as ENSEMBLE_KERNELS, block_bootstrap
 from ..filters import CAUSAL_KERNELS, KERNELS as FILTER_KERNELS, design_lowpass, lowpass_block, lowpass_start
 from ..library import PolynomialForcingLibrary
 from ..physical import KERNELS as PHYSICAL_KERNELS
-from ..simulate import KERNELS as INTEGRATION_KERNELS, PARALLEL_MIN_WORK, simulate
+from ..simulate import KERNELS as INTEGRATION_KERNELS, PARALLEL_MIN_WORK, kernels_cached as _cached, simulate
 from ..sindy import KERNELS as SINDY_KERNELS, integration_errors
-from ..simulate import kernels_cached as _cached
 from .regimes import KERNELS as REGIME_KERNELS, RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow
 from .rolling import RollingConfig, RollingIdentifier, WindowFit, window_coordinates
 

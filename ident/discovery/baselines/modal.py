@@ -27,6 +27,7 @@ from scipy.optimize import least_squares
 
 from ..model import NUMERIC_FAILURES, Element, LinearModel, lstsq, mode_states
 from ..signals import ORDER, Prepared, convert, frf
+from ..split import rows_of
 from . import Baseline, Location, dominant_mode, element_force
 
 MAX_MODES = 12
@@ -386,7 +387,7 @@ class ModalBaseline(Baseline):
         return new, [gains_from_residues(C, d, scale) for d in D], err
 
     def refit(self, prep: Prepared, segments, elements: tuple[Element, ...]) -> "ModalBaseline":
-        rows = np.concatenate([np.arange(s.start, s.stop) for s in segments])
+        rows = rows_of(segments)
         forces = [element_force(el, prep) for el in elements]
         try:
             poles = refine_poles(self.model.poles, prep, rows, elements, forces, max_nfev=10,
