@@ -32,6 +32,8 @@ KINDS = ("displacement", "velocity", "acceleration")
 # zero inside a compiled kernel, an optimiser given non-finite values): a failed candidate, never a crash
 NUMERIC_FAILURES = (np.linalg.LinAlgError, ValueError, FloatingPointError, ZeroDivisionError)
 
+OBSERVED = 0.03  # the nudging's cut-off: directions of the states observed 30 dB below the best one
+
 
 @dataclass(frozen=True)
 class Element:
@@ -267,13 +269,20 @@ def simulate(model: LinearModel, U: np.ndarray, fs_hz: float, outputs, w0: np.nd
 def nudging_gain(model: LinearModel, rate: float) -> tuple[np.ndarray, np.ndarray]:
     """C_obs (k, m) of the responses' relative velocities and the gain K (m, k) that relaxes them towards
     observed ones at ``rate`` [1/s]: K = rate x the least-squares map from a velocity error to the modal
-    states that would remove it."""
+    states that would remove it, over the directions of the states the velocities observe at least
+    ``OBSERVED`` as well as the best observed one.
+
+    With several responses and mode shapes that are real (as a structure's are, up to the fit's error),
+    a velocity at one instant sees each mode's velocity, not its displacement: the map has directions
+    observed next to nothing, and a pseudo-inverse that keeps them maps whatever part of a velocity error
+    the model cannot produce (a mode it lacks, noise) into states thousands of times too large. The
+    dynamics carry a displacement into a velocity a quarter period later, where it is observed."""
     lam = model.poles
     Co = model.C * lam[None, :]
     m = lam.size
     # real map from (Re w, Im w) to the velocities: v = 2 Re(Co w)
     Mr = np.hstack([2 * Co.real, -2 * Co.imag])
-    pinv = np.linalg.pinv(Mr, rcond=1e-6)
+    pinv = np.linalg.pinv(Mr, rcond=OBSERVED)
     K = rate * (pinv[:m] + 1j * pinv[m:])
     return Co, K
 
