@@ -107,11 +107,13 @@ def test_contact_pushes_and_never_pulls():
     assert f.tolist() == [0.0, pytest.approx(20.0), 0.0, pytest.approx(-50.0), pytest.approx(100.0)]
 
 
-def test_iwan_joint_dissipates_the_analytic_energy_per_cycle():
-    # N Jenkins elements, stiffness k/N, slip displacements delta (i + 1/2) / N: under z = A sin, each slipping
-    # element dissipates 4 (k/N) delta_i (A - delta_i) per cycle (Iwan 1966)
-    k, delta, A = 1000.0, 1e-3, 0.8e-3
-    p = law_parameters(CAUSES["hysteretic_joint"], {"slip": delta}) * np.array([k, 1, 1, 1])
+@pytest.mark.parametrize("onset", [0.0, 0.4, 0.8])
+def test_iwan_joint_dissipates_the_analytic_energy_per_cycle(onset):
+    # N Jenkins elements, stiffness k/N, slip displacements delta (r + (1 - r)(i + 1/2) / N): under z = A sin,
+    # each slipping element dissipates 4 (k/N) delta_i (A - delta_i) per cycle (Iwan 1966); with an onset
+    # r = 0.8 only the elements below A = 0.9 delta slip
+    k, delta, A = 1000.0, 1e-3, 0.9e-3
+    p = law_parameters(CAUSES["hysteretic_joint"], {"slip": delta, "onset": onset}) * np.array([k, 1, 1, 1])
     t = np.linspace(0, 3, 30001)
     z = A * np.sin(2 * np.pi * t)
     f = force_series(JOINT, p, z, np.gradient(z, t))
@@ -119,8 +121,9 @@ def test_iwan_joint_dissipates_the_analytic_energy_per_cycle():
     # the element's force is the Iwan force minus its stuck stiffness k z, which encloses no area: the work
     # the restoring force takes over a cycle is the Iwan loop's
     area = np.trapezoid(f[one], z[one])
-    d = delta * (np.arange(N_IWAN) + 0.5) / N_IWAN
+    d = delta * (onset + (1 - onset) * (np.arange(N_IWAN) + 0.5) / N_IWAN)
     expected = np.sum(4 * (k / N_IWAN) * d * np.clip(A - d, 0, None))
+    assert expected > 0 and np.count_nonzero(d < A) == {0.0: 9, 0.4: 8, 0.8: 5}[onset]
     assert area == pytest.approx(expected, rel=2e-3)
 
 

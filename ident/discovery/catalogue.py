@@ -13,7 +13,8 @@ location, so it comes out per unit modal mass at the location, see ``baselines``
     coulomb_friction     f = F tanh(v / eps)           (dry friction, eps a small fraction of the velocity)
     quadratic_damping    f = c2 v |v|                  (aerodynamic drag)
     hysteretic_joint     f = -sum_i k/N s_i            (Iwan: N Jenkins elements, stiffness k/N each, slip
-                                                        displacements delta (i + 1/2) / N; s_i the slider,
+                                                        displacements spread evenly from r delta to delta,
+                                                        delta (r + (1 - r)(i + 1/2) / N); s_i the slider,
                                                         dragged along once |z - s_i| would exceed it)
     linear_mismatch      f = dk z + dc v               (a spring and a damper missing from the model)
 
@@ -38,6 +39,7 @@ from numba import njit
 NONE, CONTACT, CUBIC, QUADRATIC, COULOMB, QDAMP, JOINT, LINEAR = range(8)
 SIDES = ("both", "positive", "negative")
 N_IWAN = 10  # Jenkins elements of the joint
+ONSETS = (0.0, 0.4, 0.8)  # the joint's slip onsets scanned by the refinement (share of its largest slip)
 N_LAW = 3  # numbers per law besides the coefficient(s): see each cause's ``law_parameters``
 
 
@@ -89,7 +91,8 @@ CAUSES: dict[str, Cause] = {c.name: c for c in (
           separates_by="a high level: drag damps large motion most (equivalent damping ~ amplitude)"),
     Cause("hysteretic_joint", JOINT,
           (Parameter("stiffness_per_mass", "1/s^2", "joint stiffness lost when it slips, per modal mass"),),
-          (Parameter("slip", "m", "displacement across the joint at which its strongest element slips"),),
+          (Parameter("slip", "m", "displacement across the joint at which its strongest element slips"),
+           Parameter("onset", "", "share of that slip below which no element slips (0: microslip from rest)")),
           separates_by="a stepped sine at several levels: a joint softens and damps more as it slips, "
                        "a friction damper does not soften"),
     Cause("linear_mismatch", LINEAR,
@@ -111,7 +114,7 @@ SENSOR = tuple(n for n, c in CAUSES.items() if c.kind == "sensor")
 def law(code, p, z, v, s):  # pragma: no cover - compiled
     """Restoring force of a law with coefficient(s) p[0] (p[1]: the damper of linear_mismatch) and
     shape p[1:] (contact: gap, side 0/1/2 for both/positive/negative, damping while touching; coulomb:
-    eps; joint: slip), at displacement z and velocity v; s the joint's sliders (read only: ``slide``
+    eps; joint: slip, onset), at displacement z and velocity v; s the joint's sliders (read only: ``slide``
     moves them between steps)."""
     if code == CONTACT:
         g = p[1]
@@ -146,7 +149,7 @@ def slide(code, p, z, s):  # pragma: no cover - compiled
     if code != JOINT:
         return
     for i in range(N_IWAN):
-        d = p[1] * (i + 0.5) / N_IWAN
+        d = p[1] * (p[2] + (1.0 - p[2]) * (i + 0.5) / N_IWAN)
         if s[i] < z - d:
             s[i] = z - d
         elif s[i] > z + d:
@@ -174,14 +177,15 @@ def law_parameters(cause: Cause, shape: dict, column: int = 0) -> np.ndarray:
     elif cause.code == COULOMB:
         p[1] = float(shape["eps"])
     elif cause.code == JOINT:
-        p[1] = float(shape["slip"])
+        p[1], p[2] = float(shape["slip"]), float(shape.get("onset", 0.0))
     return p
 
 
 def shapes(cause: Cause, z: np.ndarray, v: np.ndarray, n_grid: int = 24) -> list[tuple[dict, np.ndarray]]:
     """The cause's force shapes on a measured coordinate: (shape parameters, unit-coefficient force per
     column of the regression). Nonlinear shape parameters on a grid spanning the motion: a contact's gap
-    over 10-95 % of the largest |z| on each side, a joint's slip over 1-100 % of the z range."""
+    over 10-95 % of the largest |z| on each side, a joint's slip over 1-100 % of the z range (its
+    elements slipping from rest: the onset is scanned by simulation, ``search.refine``)."""
     z = np.ascontiguousarray(z, float)
     v = np.ascontiguousarray(v, float)
     top = float(np.max(np.abs(z))) if z.size else 0.0
@@ -197,7 +201,7 @@ def shapes(cause: Cause, z: np.ndarray, v: np.ndarray, n_grid: int = 24) -> list
     if cause.code == JOINT:
         out = []
         for frac in np.geomspace(0.01, 1.0, n_grid // 2):
-            shp = {"slip": float(frac * 2 * top)}
+            shp = {"slip": float(frac * 2 * top), "onset": 0.0}
             out.append((shp, _law_series(JOINT, law_parameters(cause, shp), z, v)[:, None]))
         return out
     if cause.code == COULOMB:

@@ -30,7 +30,7 @@ from scipy.optimize import minimize
 from scipy.stats import t as student_t
 
 from .baselines import Baseline, Location
-from .catalogue import CAUSES, CONTACT, JOINT, SIDES, force_series, law_parameters, shapes
+from .catalogue import CAUSES, CONTACT, JOINT, ONSETS, SIDES, force_series, law_parameters, shapes
 from .model import NUMERIC_FAILURES, Element, LinearModel, force_response, lstsq, nudging_gain, simulate, substeps_for
 from .signals import ORDER, Prepared, convert
 from .split import Split
@@ -347,7 +347,7 @@ def busiest(prep: Prepared, split: Split, loc_weights: np.ndarray, count: int) -
     return tuple(segs[k] for k in np.argsort(energy)[::-1][:count])
 
 
-def _train_error(baseline: Baseline, c: Candidate, prep: Prepared, segs, warm: int, scale, bound) -> float:
+def train_error(baseline: Baseline, c: Candidate, prep: Prepared, segs, warm: int, scale, bound) -> float:
     own = c.baseline or baseline
     try:
         _, e = block_errors(own, own.model.with_elements(c.elements), prep, segs, warm, scale, c.output, bound)
@@ -413,7 +413,7 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
     cause = CAUSES[c.cause]
     shape0 = {p.name: c.parameters[p.name] for p in cause.shape}
     n_el = len(c.elements)
-    base_err = _train_error(baseline, c, prep, segs, warm, scale, bound)
+    base_err = train_error(baseline, c, prep, segs, warm, scale, bound)
 
     # how far a coefficient may move (log): a stopper's stiffness is uncertain by orders of magnitude
     # (displacement integrated from accelerations is smoothed over millisecond contacts), others are not
@@ -423,7 +423,7 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
         if np.max(np.abs(x[:n_el])) > reach:
             return np.inf, None
         cand = _scaled(c, baseline, loc, x, shape)
-        return _train_error(baseline, cand, prep, segs, warm, scale, bound), cand
+        return train_error(baseline, cand, prep, segs, warm, scale, bound), cand
 
     best = (base_err, c)
     starts = [(shape0, 0.0)]
@@ -441,7 +441,21 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
                 for lk in levels:
                     shp = {"gap": gap0 * fct, "side": side}
                     cand = _scaled(c, baseline, loc, np.full(n_el, lk), shp)
-                    scan.append((_train_error(baseline, cand, prep, segs[:2], warm, scale, bound), shp, lk))
+                    scan.append((train_error(baseline, cand, prep, segs[:2], warm, scale, bound), shp, lk))
+        scan.sort(key=lambda s: s[0])
+        starts = [(shp, lk) for _, shp, lk in scan[:2]]
+    elif cause.code == JOINT:
+        # scan the slip onset with the slip and stiffness: the regression sees a joint slipping from rest,
+        # a preloaded one slips only near the largest motion, and a residual regression cannot tell the
+        # two apart (its best fit of a late onset is a force that destabilises the simulation)
+        slip0 = float(shape0["slip"])
+        scan = []
+        for onset in ONSETS:
+            for fct in (0.5, 1.0, 2.0, 4.0):
+                for lk in (0.0, 1.0, 2.0):
+                    shp = {"slip": slip0 * fct, "onset": onset}
+                    cand = _scaled(c, baseline, loc, np.full(n_el, lk), shp)
+                    scan.append((train_error(baseline, cand, prep, segs[:2], warm, scale, bound), shp, lk))
         scan.sort(key=lambda s: s[0])
         starts = [(shp, lk) for _, shp, lk in scan[:2]]
     for shp, lk in starts:
@@ -472,7 +486,7 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
     e, cand = best
     if fit is not None:
         cand = replace(cand, baseline=base0.refit(fit[0], fit[1], cand.elements))
-        e = _train_error(base0, cand, prep, segs, warm, scale, bound)
+        e = train_error(base0, cand, prep, segs, warm, scale, bound)
     return replace(cand, refined=True, train_nrmse=e)
 
 
