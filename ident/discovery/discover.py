@@ -240,7 +240,8 @@ def _leaders(cands: list[Candidate], baseline: Baseline, by_loc: dict, prep: Pre
         if loc.name not in base_err:
             base_err[loc.name] = train_error(baseline, replace(c, elements=(), output=(), baseline=None), prep,
                                              segs, warm, scale, bound)
-        e = train_error(baseline, c, prep, segs, warm, scale, bound) / base_err[loc.name]
+        e_c, e_0 = train_error(baseline, c, prep, segs, warm, scale, bound), base_err[loc.name]
+        e = e_c / e_0 if 0 < e_0 < np.inf else (0.0 if np.isfinite(e_c) else np.inf)
         if c.cause not in by_sim or e < by_sim[c.cause][0]:
             by_sim[c.cause] = (e, c)
         rank = (c.fit_r2, c.baseline is not None)  # a jointly fitted version before its plain twin
