@@ -309,6 +309,13 @@ def test_the_gap_says_nothing_between_the_free_and_the_hitting_amplitudes():
     assert _gap_evidence(0.9e-3, free, hit, cfg)[1] == pytest.approx(np.log(0.9) / spread)
     assert _gap_evidence(2.2e-3, free, hit, cfg)[1] == pytest.approx(np.log(1.1) / spread)
     assert _gap_evidence(0.3e-3, free, hit, cfg)[1] == -1.5  # clipped
+    # no free amplitude learned yet: below the hitting ones free (down to -3), above them hitting (up to 1)
+    nothing = np.zeros(0)
+    assert _gap_evidence(1.8e-3, nothing, hit, cfg)[1] == pytest.approx(np.log(0.9) / 0.15)
+    assert _gap_evidence(2.2e-3, nothing, hit, cfg)[1] == pytest.approx(np.log(1.1) / 0.15)
+    assert _gap_evidence(3.0e-3, nothing, hit, cfg)[1] == 1.0
+    # free amplitudes above the hitting ones: the learned sets disagree, no evidence above them
+    assert _gap_evidence(3.0e-3, np.full(10, 2.5e-3), hit, cfg)[1] == 0.0
 
 
 def two_tips(seconds, own1, c=4e-3, f=40.0, fs=FS, seed=0):

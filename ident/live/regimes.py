@@ -37,7 +37,8 @@ spectral peak) and a Hann-windowed spectrum of every channel:
 - **displacement amplitude against the gap**: the relative displacement at the drive
   frequency, Z = |tip - base| / (2 pi f)^2 at f, against the stopper gap learned online
   (evidence below the largest amplitudes the distortion called free and above the smallest it
-  called hitting, none in between; far below every amplitude seen hitting a beam is free); with the gap from the
+  called hitting, none in between; far below every amplitude seen hitting a beam is free, and
+  before any free amplitude is learned, above them it hits); with the gap from the
   config (``gap_m``), the peak of the displacement waveform rebuilt from the first eight
   harmonics (a stopper clips the motion: the fundamental of a beam on a stiff stopper stays
   below the gap);
@@ -87,6 +88,7 @@ from numba import njit
 LABELS = ("linear", "localized-1", "localized-2", "impacting-both")
 PEAK_HARMONICS = 8  # harmonics of the drive in the reconstructed displacement waveform
 LEARNED_CAP = 1.5  # largest log-odds a learned gap may give
+ABOVE_HIT_CAP = 1.0  # ... an amplitude above those seen hitting, before any free one was learned
 LEARN_WINDOWS = 400  # confident windows kept per beam for the learned gap and stiffness (100 s at 0.25 s)
 FLOOR_QUANTILE = 0.2
 # the coupling's share learned per stream (see _cross_talk): rows kept where the other beam distorts at least
@@ -682,6 +684,9 @@ def _gap_evidence(z: float, free: np.ndarray, hit: np.ndarray, cfg: RegimeConfig
     beam go well beyond it (they sit far above, and the largest free amplitudes just below). So only an
     amplitude below every free one or above every hitting one is evidence; in between it says nothing and
     the distortion decides (an interpolation between them called a soft stopper's grazing beam free).
+    Before any free amplitude is learned, one at or above the amplitudes seen hitting is at or beyond the
+    gap (the gap is at most them): evidence of hitting, as far below them is of free (where free amplitudes
+    above hitting ones were seen, the learned sets disagree and say nothing).
     """
     if z <= 0:
         return float("nan"), -LEARNED_CAP
@@ -697,4 +702,6 @@ def _gap_evidence(z: float, free: np.ndarray, hit: np.ndarray, cfg: RegimeConfig
         return gap, 0.0  # where in between the gap lies depends on the stopper (see the docstring)
     if np.isfinite(hi) and z < hi:  # below every amplitude seen hitting: far below, surely free
         return float("nan"), _clip(np.log(z / hi) / 0.15, -3.0, 0.0)
+    if np.isfinite(hi) and not np.isfinite(lo):  # at or above amplitudes seen hitting: at or beyond the gap
+        return float("nan"), _clip(np.log(z / hi) / 0.15, 0.0, ABOVE_HIT_CAP)
     return float("nan"), 0.0
