@@ -9,8 +9,9 @@ import pytest
 from daq.sim.excitation import Kick, Step
 from daq.sim.rig import RigConfig, simulate_rig
 from daq.sim.sensors import to_counts
-from ident.live.regimes import (LABELS, Decision, RegimeConfig, RegimeMonitor, decide, label_of, regime_start,
-                                regime_step)
+from ident.live.regimes import (CROSS_BAND, CROSS_MARGIN, CROSS_MIN_WINDOWS, CROSS_QUANTILE, LABELS, Decision,
+                                RegimeConfig, RegimeMonitor, _cross_talk, _gap_evidence, decide, label_of,
+                                regime_start, regime_step)
 from ident.live.scoring import score_regimes, true_changes
 
 FS = 2000.0
@@ -280,3 +281,72 @@ def test_bad_config_and_input():
         RegimeMonitor().step(np.zeros((10, 2)))
     with pytest.raises(ValueError, match="NaN"):
         RegimeMonitor().step(np.full((10, 3), np.nan))
+
+
+# --- the coupling's share of the other beam's distortion, learned from the stream ---
+
+def test_the_coupling_share_is_the_streams_low_quantile_within_the_bound():
+    cfg = RegimeConfig()
+    rng = np.random.default_rng(3)
+    n = CROSS_MIN_WINDOWS + 10
+    ratios = rng.uniform(1e-3, 3e-3, n)
+    near = np.column_stack([np.full(n, 10.0), ratios, np.full(n, np.nan)])  # no impact rows: the bound stays
+    far = np.column_stack([np.full(n, 10.0 * np.exp(2 * CROSS_BAND)), np.full(n, 1e-6), np.full(n, 1e-6)])
+    k = int(CROSS_QUANTILE * (n - 1))
+    expected = CROSS_MARGIN[0] * np.sort(ratios)[k]
+    assert _cross_talk(np.vstack([near, far]), 10.0, cfg) == (pytest.approx(expected, rel=1e-12),
+                                                              cfg.cross_talk_impact)
+    assert _cross_talk(near[:CROSS_MIN_WINDOWS - 1], 10.0, cfg) == (cfg.cross_talk, cfg.cross_talk_impact)
+    # never above the configured bound, whatever the stream shows
+    assert _cross_talk(np.column_stack([near[:, :1], near[:, 1:2] * 100, near[:, 2:]]), 10.0, cfg)[0] == cfg.cross_talk
+
+
+def test_the_gap_says_nothing_between_the_free_and_the_hitting_amplitudes():
+    cfg = RegimeConfig()
+    free, hit = np.full(10, 1.0e-3), np.full(10, 2.0e-3)
+    spread = 0.5 * np.log(2.0)
+    assert _gap_evidence(1.5e-3, free, hit, cfg) == (pytest.approx(np.sqrt(2) * 1e-3), 0.0)
+    assert _gap_evidence(0.9e-3, free, hit, cfg)[1] == pytest.approx(np.log(0.9) / spread)
+    assert _gap_evidence(2.2e-3, free, hit, cfg)[1] == pytest.approx(np.log(1.1) / spread)
+    assert _gap_evidence(0.3e-3, free, hit, cfg)[1] == -1.5  # clipped
+    # no free amplitude learned yet: below the hitting ones free (down to -3), above them hitting (up to 1)
+    nothing = np.zeros(0)
+    assert _gap_evidence(1.8e-3, nothing, hit, cfg)[1] == pytest.approx(np.log(0.9) / 0.15)
+    assert _gap_evidence(2.2e-3, nothing, hit, cfg)[1] == pytest.approx(np.log(1.1) / 0.15)
+    assert _gap_evidence(3.0e-3, nothing, hit, cfg)[1] == 1.0
+    # free amplitudes above the hitting ones: the learned sets disagree, no evidence above them
+    assert _gap_evidence(3.0e-3, np.full(10, 2.5e-3), hit, cfg)[1] == 0.0
+
+
+def two_tips(seconds, own1, c=4e-3, f=40.0, fs=FS, seed=0):
+    """Base, tip 1, tip 2 [m/s^2]: a sine drive; tip 2 hits (its odd harmonics a tenth of its fundamental's
+    power); tip 1 carries the coupling's share c of tip 2's harmonic power and, from own1 on, 10 c of it."""
+    t = np.arange(int(seconds * fs)) / fs
+    w = 2 * np.pi * f
+    base = np.sin(w * t)
+    fund = 20 * np.sin(w * t - np.radians(100))  # lags the base: a passive beam above resonance
+    harm = np.sqrt(0.1 / 2) * 20 * (np.sin(3 * w * t) + np.sin(5 * w * t))  # two harmonics: 0.1 of the power
+    scale = np.where(t < own1, np.sqrt(c), np.sqrt(10 * c))
+    noise = np.random.default_rng(seed).normal(0, 1e-3, (len(t), 3))
+    return np.column_stack([base, fund + scale * harm, fund + harm]) + noise
+
+
+def test_a_grazing_beam_beside_a_hitting_one_is_found_once_the_coupling_is_measured():
+    """Tip 1 first carries 0.4 % of tip 2's harmonic power (the coupling), then 4 %: within the configured
+    bound (5 %), so without the stream's measure of the coupling it is called free throughout; with it, the
+    share removed is twice the measured 0.4 % and the excess (3.2 % of tip 2's harmonics, 3.2e-3 of tip 1's
+    fundamental) calls beam 1 hitting."""
+    c = 4e-3
+    x = two_tips(60.0, own1=30.0, c=c)
+    windows, _ = run_monitor(x)
+    early = [w for w in windows if 10 < w.t_s < 29]
+    late = [w for w in windows if w.t_s > 32]
+    assert all(w.label == "localized-2" for w in early)
+    # the measured share: c (at 40 Hz the fundamental's leakage into the harmonic band is below 1e-6 of it)
+    assert all(w.beams[0].cross_talk == pytest.approx(CROSS_MARGIN[0] * c, rel=0.01) for w in early + late)
+    assert all(w.beams[0].distortion == pytest.approx((10 - CROSS_MARGIN[0]) * c * 0.1, rel=0.01) for w in late)
+    assert all(w.label == "impacting-both" for w in late)
+    # the same data from the second half on: nothing measured yet, the bound removes it all
+    fresh, _ = run_monitor(two_tips(60.0, own1=0.0, c=c)[: int(10 * FS)])
+    assert all(w.beams[0].cross_talk == RegimeConfig().cross_talk for w in fresh)
+    assert all(w.label == "localized-2" for w in fresh if w.t_s > 1)

@@ -13,8 +13,20 @@ spectral peak) and a Hann-windowed spectrum of every channel:
   noise is a low quantile of the bands' bins, the lower of this window's and the 10th percentile
   of the last 400 windows' (the noise is stationary; a window full of impacts raises its own).
   Removed: what the base's own harmonics would put into the tip, and the share of the other
-  beam's excess the coupling carries over (``cross_talk`` of its harmonic power,
-  ``cross_talk_impact`` of its impact power: the beams' higher modes are alike). A linear beam
+  beam's excess the coupling carries over: at most ``cross_talk`` of its harmonic power and
+  ``cross_talk_impact`` of its impact power (the beams' higher modes are alike), less where the
+  stream has shown less. The share is a property of the rig at a drive frequency (the coupling's
+  transfer at the harmonics), and it ranges over two decades between rigs (0.015 % to 6 % of the
+  harmonic power on the generator's rigs), so the monitor measures it: in every window where the
+  other beam distorts clearly, the ratio of this beam's excess to the other's is kept with the drive
+  frequency; from 20 such windows within 10 % of the present drive frequency, twice their 10th
+  percentile (five times for the bursty impact band) replaces the bound when lower. Windows where
+  this beam hits too only raise the ratio, so the low quantile is the coupling's (once the beam has
+  been free beside the other hitting at that frequency). A beam that grazes its stopper beside one
+  that hits hard shows a few times the harmonics the coupling carried while it was free, which the
+  fixed bound hid. The impact band counts only where it stands out of its noise: every stopper
+  folds the motion into the harmonics, so a silent harmonic band says free even when the wide,
+  noisy impact band can say nothing. A linear beam
   driven by a sine answers with that sine alone; a stopper folds the motion and puts power at
   the harmonics (odd ones for two-sided stoppers, ``odd_distortion``; even ones too for
   one-sided), and a stiff one rings at the beam's higher modes. The acceleration weights
@@ -24,8 +36,9 @@ spectral peak) and a Hann-windowed spectrum of every channel:
   way);
 - **displacement amplitude against the gap**: the relative displacement at the drive
   frequency, Z = |tip - base| / (2 pi f)^2 at f, against the stopper gap learned online
-  (between the largest amplitudes the distortion called free and the smallest it called
-  hitting; far below every amplitude seen hitting a beam is free); with the gap from the
+  (evidence below the largest amplitudes the distortion called free and above the smallest it
+  called hitting, none in between; far below every amplitude seen hitting a beam is free, and
+  before any free amplitude is learned, above them it hits); with the gap from the
   config (``gap_m``), the peak of the displacement waveform rebuilt from the first eight
   harmonics (a stopper clips the motion: the fundamental of a beam on a stiff stopper stays
   below the gap);
@@ -75,8 +88,17 @@ from numba import njit
 LABELS = ("linear", "localized-1", "localized-2", "impacting-both")
 PEAK_HARMONICS = 8  # harmonics of the drive in the reconstructed displacement waveform
 LEARNED_CAP = 1.5  # largest log-odds a learned gap may give
+ABOVE_HIT_CAP = 1.0  # ... an amplitude above those seen hitting, before any free one was learned
 LEARN_WINDOWS = 400  # confident windows kept per beam for the learned gap and stiffness (100 s at 0.25 s)
 FLOOR_QUANTILE = 0.2
+# the coupling's share learned per stream (see _cross_talk): rows kept where the other beam distorts at least
+# CROSS_STRONG times its band's noise and 10 x distortion_on; used from CROSS_MIN_WINDOWS rows within CROSS_BAND
+# (log drive frequency) of the window's drive, their CROSS_QUANTILE times CROSS_MARGIN (harmonic, impact band)
+CROSS_STRONG = 30.0
+CROSS_MIN_WINDOWS = 20  # 5 s of windows
+CROSS_BAND = 0.1
+CROSS_QUANTILE = 0.1
+CROSS_MARGIN = (2.0, 5.0)  # impacts come in bursts: their ratio scatters more than the harmonics'
 _FLOOR_NORM = -np.log(1 - FLOOR_QUANTILE)  # a white floor's mean power over its quantile
 
 
@@ -125,6 +147,7 @@ class BeamState:
     sign: int  # the tip's sign against the base, from the energy flow
     evidence: tuple[float, float, float]  # log-odds from distortion, amplitude/gap, stiffness
     impact_rms: float  # m/s^2 in the impact band above the floor
+    cross_talk: float  # share of the other beam's harmonic excess removed as the coupling's (bound or learned)
 
 
 @dataclass(frozen=True)
@@ -218,6 +241,7 @@ class RegimeState:
     free_z: tuple[np.ndarray, np.ndarray]  # displacement amplitudes of windows the distortion called free
     hit_z: tuple[np.ndarray, np.ndarray]  # ... called hitting
     free_w: tuple[np.ndarray, np.ndarray]  # harmonic-balance natural frequencies of free windows
+    cross: tuple[np.ndarray, np.ndarray]  # (k, 3) per beam: drive frequency, its excess over the other's (harmonic, impact)
     decision: Decision
 
 
@@ -229,7 +253,9 @@ def regime_start(cfg: RegimeConfig = RegimeConfig()) -> RegimeState:
     if int(round(cfg.window_s * cfg.fs_hz)) < 32:
         raise ValueError(f"window_s {cfg.window_s} s holds fewer than 32 samples at {cfg.fs_hz} Hz")
     empty = (np.zeros(0), np.zeros(0))
-    return RegimeState(cfg, np.zeros((0, 3)), 0, 0, np.zeros(2), np.zeros((0, 3)), empty, empty, empty, Decision())
+    cross = (np.zeros((0, 3)), np.zeros((0, 3)))
+    return RegimeState(cfg, np.zeros((0, 3)), 0, 0, np.zeros(2), np.zeros((0, 3)), empty, empty, empty, cross,
+                       Decision())
 
 
 def regime_step(state: RegimeState, block: np.ndarray) -> tuple[RegimeState, list[RegimeWindow], list[RegimeChange]]:
@@ -539,6 +565,7 @@ def _window(state: RegimeState, sp: _Spectral, t_end: float) -> tuple[RegimeStat
     base_i = max(0.0, imp[0] - fl[0] * ni)
     beams, probs = [], []
     free_z, hit_z, free_w = list(state.free_z), list(state.hit_z), list(state.free_w)
+    cross = list(state.cross)
     zs = []
     # excess powers of both tips above the floor, the base's share removed
     ex_h = [harm[j] - fl[j] * nh - base_h for j in (1, 2)]
@@ -555,13 +582,26 @@ def _window(state: RegimeState, sp: _Spectral, t_end: float) -> tuple[RegimeStat
         phase = _angle_deg(tip / base) if abs(base) > 0 else float("nan")
         fund = max(fund_[j], 1e-300)
         # what the other beam's distortion puts into this one through the coupling
-        own_h = ex_h[i] - cfg.cross_talk * max(ex_h[o], 0.0)
-        own_i = ex_i[i] - cfg.cross_talk_impact * max(ex_i[o], 0.0)
+        ct_h, ct_i = _cross_talk(state.cross[i], f, cfg)
+        own_h = ex_h[i] - ct_h * max(ex_h[o], 0.0)
+        own_i = ex_i[i] - ct_i * max(ex_i[o], 0.0)
         noise_h, noise_i = fl[j] * nh, fl[j] * ni
         d_h, e_h, sig_h = _evidence(own_h, noise_h, fund, cfg)
         d_i, e_i, sig_i = _evidence(own_i, noise_i, fund, cfg) if ni else (0.0, -3.0, False)
         odd = (odd_[j] - fl[j] * nodd) / fund
-        e_d = max(e_h, e_i)
+        # every stopper folds the motion into the harmonics, so a harmonic band that shows nothing says free;
+        # ringing above it adds evidence where it stands out, but an impact band buried in noise (wide: it
+        # holds most of the noise) must not mask what the harmonic band shows
+        e_d = max(e_h, e_i) if sig_i else e_h
+        # the share the coupling carries: this beam's excess over the other's where the other distorts clearly
+        o_fund = max(fund_[2 - i], 1e-300)
+        strong_h = ex_h[o] > CROSS_STRONG * max(fl[2 - i] * nh, 1e-300) and ex_h[o] / o_fund > 10 * cfg.distortion_on
+        strong_i = (ni > 0 and ex_i[o] > CROSS_STRONG * max(fl[2 - i] * ni, 1e-300)
+                    and ex_i[o] / o_fund > 10 * cfg.distortion_on)
+        if f > 0 and (strong_h or strong_i):
+            row = np.array([[f, max(ex_h[i], 0.0) / ex_h[o] if strong_h else np.nan,
+                             max(ex_i[i], 0.0) / ex_i[o] if strong_i else np.nan]])
+            cross[i] = np.vstack([cross[i], row])[-LEARN_WINDOWS:]
         significant = sig_h or sig_i
         distortion = max(d_h, 0.0) + max(d_i, 0.0)
         peak = _peak_displacement(signs[i] * sp.harmonics[:, j] - sp.harmonics[:, 0], omega)
@@ -587,7 +627,7 @@ def _window(state: RegimeState, sp: _Spectral, t_end: float) -> tuple[RegimeStat
                 free_w[i] = np.append(free_w[i], 2 * np.pi * fn)[-LEARN_WINDOWS:]
         impact_rms = math.sqrt(max(d_i, 0.0) * fund * sp.power_scale)
         beams.append((p, max(p, 1 - p), z, peak, gap, distortion, odd, max(d_i, 0.0), significant,
-                      fn, f_free, phase, signs[i], (e_d, e_a, e_k), impact_rms))
+                      fn, f_free, phase, signs[i], (e_d, e_a, e_k), impact_rms, ct_h))
     decision, changed = decide(state.decision, (probs[0], probs[1]), cfg)
     beams = [BeamState(h, *b) for b, h in zip(beams, decision.hit)]
     change = None
@@ -596,8 +636,23 @@ def _window(state: RegimeState, sp: _Spectral, t_end: float) -> tuple[RegimeStat
     ratio = zs[0] / zs[1] if zs[1] > 0 else float("inf")
     window = RegimeWindow(t_end, decision.label, decision.candidate, f, (beams[0], beams[1]), ratio)
     state = replace(state, power_flow=flow, floors=floors, free_z=tuple(free_z), hit_z=tuple(hit_z),
-                    free_w=tuple(free_w), decision=decision)
+                    free_w=tuple(free_w), cross=tuple(cross), decision=decision)
     return state, window, change
+
+
+def _cross_talk(rows: np.ndarray, f: float, cfg: RegimeConfig) -> tuple[float, float]:
+    """(harmonic, impact) share of the other beam's excess power that the coupling carries into this beam at
+    drive frequency f: cfg's bounds, or less where this stream has shown less."""
+    out = [cfg.cross_talk, cfg.cross_talk_impact]
+    if len(rows) < CROSS_MIN_WINDOWS or not f > 0:
+        return out[0], out[1]
+    near = rows[np.abs(np.log(rows[:, 0] / f)) < CROSS_BAND]
+    for k in (0, 1):
+        r = near[:, 1 + k]
+        r = r[np.isfinite(r)]
+        if len(r) >= CROSS_MIN_WINDOWS:
+            out[k] = min(out[k], CROSS_MARGIN[k] * float(_low_quantile(r, CROSS_QUANTILE)))
+    return out[0], out[1]
 
 
 def _peak_displacement(rel_acc: np.ndarray, omega: float) -> float:
@@ -624,16 +679,29 @@ def _gap_evidence(z: float, free: np.ndarray, hit: np.ndarray, cfg: RegimeConfig
 
     Hitting needs an amplitude at least the gap, and the gap is at most the amplitudes at which the beam
     was seen hitting: far below them a beam is free whatever else is uncertain. Where the amplitudes
-    called free and those called hitting do not overlap, the gap lies between them.
+    called free and those called hitting do not overlap, the gap lies between them, but where depends on
+    the stopper: a rigid one clips the motion (the hitting amplitudes sit at the gap), a soft one lets the
+    beam go well beyond it (they sit far above, and the largest free amplitudes just below). So only an
+    amplitude below every free one or above every hitting one is evidence; in between it says nothing and
+    the distortion decides (an interpolation between them called a soft stopper's grazing beam free).
+    Before any free amplitude is learned, one at or above the amplitudes seen hitting is at or beyond the
+    gap (the gap is at most them): evidence of hitting, as far below them is of free (where free amplitudes
+    above hitting ones were seen, the learned sets disagree and say nothing).
     """
     if z <= 0:
         return float("nan"), -LEARNED_CAP
     hi = float(_low_quantile(hit, 0.05)) if len(hit) >= 8 else float("nan")
     lo = float(_low_quantile(free, 0.95)) if len(free) >= 8 else float("nan")
     if np.isfinite(hi) and np.isfinite(lo) and lo < hi:
-        gap = float(np.sqrt(lo * hi))
+        gap = float(np.sqrt(lo * hi))  # reported
         spread = max(cfg.gap_scale, 0.5 * float(np.log(hi / lo)))
-        return gap, _clip(np.log(z / gap) / spread, -LEARNED_CAP, LEARNED_CAP)
+        if z <= lo:
+            return gap, _clip(np.log(z / lo) / spread, -LEARNED_CAP, 0.0)
+        if z >= hi:
+            return gap, _clip(np.log(z / hi) / spread, 0.0, LEARNED_CAP)
+        return gap, 0.0  # where in between the gap lies depends on the stopper (see the docstring)
     if np.isfinite(hi) and z < hi:  # below every amplitude seen hitting: far below, surely free
         return float("nan"), _clip(np.log(z / hi) / 0.15, -3.0, 0.0)
+    if np.isfinite(hi) and not np.isfinite(lo):  # at or above amplitudes seen hitting: at or beyond the gap
+        return float("nan"), _clip(np.log(z / hi) / 0.15, 0.0, ABOVE_HIT_CAP)
     return float("nan"), 0.0
