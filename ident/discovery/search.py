@@ -64,7 +64,8 @@ class Candidate:
     block_errors: np.ndarray | None = None
     test_nrmse: float = float("nan")
     gain: float = float("nan")  # 1 - test NRMSE / baseline test NRMSE
-    p_value: float = float("nan")  # paired test against the baseline
+    p_value: float = float("nan")  # paired test against the baseline (and its own linear part alone)
+    own_gain: float = float("nan")  # 1 - test NRMSE / that of its own linear part alone (refitted with it)
     refined: bool = False
     baseline: Baseline | None = None  # its own linear part when refitted jointly
     note: str = ""
@@ -166,16 +167,35 @@ def paired_p(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Scoring) -> Candidate:
-    """Held-out errors of a candidate, its gain and its paired test against the baseline."""
+    """Held-out errors of a candidate, its gain and its paired test against the baseline.
+
+    A candidate that carries its own linear part (refitted with its force in place) is also scored
+    against that linear part alone (``own_gain``; ``significant`` asks it to exceed the gain floor too):
+    a refit with a force on the measured motion as an extra input can give the linear part a better fit
+    for reasons of its own (the force takes up what the input cannot make: an unmodelled mode, a blow's
+    ringing), and that gain is not the cause's (independent seed 3: a Coulomb friction whose linear part
+    alone predicted 0.57 against the baseline's 1.50, and with the friction 0.56). The paired test stays
+    against the baseline: against a linear part without its stopper the differences are heavy-tailed
+    (large in the few pieces where the stopper acts) and a t-test misses what a contact adds (seed 2:
+    own gain 0.55 at p = 0.07)."""
     own = c.baseline or baseline
     model = own.model.with_elements(c.elements)
+    failed = replace(c, block_errors=np.full(sc.block_errors.size, np.inf), test_nrmse=np.inf, gain=-np.inf,
+                     p_value=1.0)
     try:
         errs, nrmse = block_errors(own, model, prep, split.test, sc.warm, sc.scale, c.output, sc.bound, sc.piece)
     except NUMERIC_FAILURES as exc:
-        return replace(c, block_errors=np.full(sc.block_errors.size, np.inf), test_nrmse=np.inf, gain=-np.inf,
-                       p_value=1.0, note=f"failed: {exc}")
+        return replace(failed, note=f"failed: {exc}")
     gain = 1.0 - nrmse / sc.test_nrmse if np.isfinite(nrmse) and sc.test_nrmse > 0 else -np.inf
-    return replace(c, block_errors=errs, test_nrmse=nrmse, gain=gain, p_value=paired_p(sc.block_errors, errs))
+    p = paired_p(sc.block_errors, errs)
+    own_gain = float("nan")
+    if c.baseline is not None and c.elements and np.isfinite(nrmse):
+        try:
+            errs0, nrmse0 = block_errors(own, own.model, prep, split.test, sc.warm, sc.scale, (), sc.bound, sc.piece)
+        except NUMERIC_FAILURES:
+            errs0, nrmse0 = np.full(errs.size, np.inf), np.inf
+        own_gain = 1.0 - nrmse / nrmse0 if np.isfinite(nrmse0) and nrmse0 > 0 else 1.0
+    return replace(c, block_errors=errs, test_nrmse=nrmse, gain=gain, p_value=p, own_gain=own_gain)
 
 
 # --- regression ---------------------------------------------------------------------------------------
@@ -502,7 +522,7 @@ class Selection:
 
 def significant(c: Candidate, settings: Settings) -> bool:
     return (np.isfinite(c.test_nrmse) and c.test_nrmse < 1.0 and c.gain > settings.gain_floor
-            and c.p_value < settings.alpha)
+            and not c.own_gain <= settings.gain_floor and c.p_value < settings.alpha)
 
 
 def beats(a: Candidate, b: Candidate, settings: Settings) -> bool:
