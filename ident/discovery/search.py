@@ -64,7 +64,7 @@ class Candidate:
     block_errors: np.ndarray | None = None
     test_nrmse: float = float("nan")
     gain: float = float("nan")  # 1 - test NRMSE / baseline test NRMSE
-    p_value: float = float("nan")  # paired test against the baseline (and its own linear part alone)
+    p_value: float = float("nan")  # paired test against the baseline
     own_gain: float = float("nan")  # 1 - test NRMSE / that of its own linear part alone (refitted with it)
     refined: bool = False
     baseline: Baseline | None = None  # its own linear part when refitted jointly
@@ -180,22 +180,21 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
     own gain 0.55 at p = 0.07)."""
     own = c.baseline or baseline
     model = own.model.with_elements(c.elements)
-    failed = replace(c, block_errors=np.full(sc.block_errors.size, np.inf), test_nrmse=np.inf, gain=-np.inf,
-                     p_value=1.0)
     try:
         errs, nrmse = block_errors(own, model, prep, split.test, sc.warm, sc.scale, c.output, sc.bound, sc.piece)
     except NUMERIC_FAILURES as exc:
-        return replace(failed, note=f"failed: {exc}")
+        return replace(c, block_errors=np.full(sc.block_errors.size, np.inf), test_nrmse=np.inf, gain=-np.inf,
+                       p_value=1.0, note=f"failed: {exc}")
     gain = 1.0 - nrmse / sc.test_nrmse if np.isfinite(nrmse) and sc.test_nrmse > 0 else -np.inf
-    p = paired_p(sc.block_errors, errs)
     own_gain = float("nan")
     if c.baseline is not None and c.elements and np.isfinite(nrmse):
         try:
-            errs0, nrmse0 = block_errors(own, own.model, prep, split.test, sc.warm, sc.scale, (), sc.bound, sc.piece)
+            _, alone = block_errors(own, own.model, prep, split.test, sc.warm, sc.scale, (), sc.bound, sc.piece)
         except NUMERIC_FAILURES:
-            errs0, nrmse0 = np.full(errs.size, np.inf), np.inf
-        own_gain = 1.0 - nrmse / nrmse0 if np.isfinite(nrmse0) and nrmse0 > 0 else 1.0
-    return replace(c, block_errors=errs, test_nrmse=nrmse, gain=gain, p_value=p, own_gain=own_gain)
+            alone = np.inf
+        own_gain = 1.0 - nrmse / alone if np.isfinite(alone) and alone > 0 else 1.0
+    return replace(c, block_errors=errs, test_nrmse=nrmse, gain=gain, p_value=paired_p(sc.block_errors, errs),
+                   own_gain=own_gain)
 
 
 # --- regression ---------------------------------------------------------------------------------------
