@@ -10,6 +10,8 @@ odd multisine at 610 Hz (26.8 Hz, 3.6 % damping, hardening); seed 3 a two-sided 
 base excitation at 1 kHz with two unmeasured blows, whose one-mode baseline predicts worse than zero.
 """
 
+import importlib
+
 import numpy as np
 import pytest
 
@@ -81,3 +83,16 @@ def test_a_gain_that_is_only_the_refitted_linear_parts_is_not_a_finding(cases):
     v = judge(c, d, 0.0)
     assert v.right and v.extra == 0, d.verdict()
     assert d.findings[0].own_gain > 0.03
+
+
+def test_a_linear_algebra_failure_in_the_search_is_a_failed_candidate_not_a_crash(monkeypatch):
+    # issue 10: an optimiser or linear-algebra failure is a failed candidate in the report, never a crash
+    # (discover's except clauses named a tuple it had not imported: the first failure raised NameError)
+    def failing(*args, **kwargs):
+        raise np.linalg.LinAlgError("SVD did not converge")
+
+    monkeypatch.setattr(importlib.import_module("ident.discovery.discover"), "regress", failing)
+    c = independent_case(15)  # a Duffing oscillator with nothing hidden
+    d = discover(c.measurement)
+    assert not d.findings
+    assert any("regression failed (SVD did not converge)" in n for n in d.notes)

@@ -23,6 +23,7 @@ from .baselines import Baseline
 from .baselines.modal import ModalBaseline, structural
 from .baselines.rig import RigBaseline
 from .characterise import characterise
+from .model import NUMERIC_FAILURES
 from .result import Discovery
 from .search import (Candidate, Scoring, Selection, Settings, baseline_residual, block_errors, busiest, choose,
                      clipping_candidates, gain_candidates, offset_findings, paired_p, predict, refine, regress, score,
@@ -229,18 +230,20 @@ def _leaders(cands: list[Candidate], baseline: Baseline, by_loc: dict, prep: Pre
     of it and gains 0.35 on held-out blocks). Nor does the simulation alone: a stopper's regression is
     a soft spring at a smaller gap, or a stiff one the simulation cannot follow, which only the
     refinement's scan corrects (independent seed 60: explains 24 %, simulates to the bound)."""
-    base_err: dict[str, float] = {}
+    at: dict[str, tuple[tuple[slice, ...], float]] = {}  # per location: its busiest blocks, the baseline's error there
     by_sim: dict[str, tuple[float, Candidate]] = {}
     by_r2: dict[str, Candidate] = {}
     for c in cands:
         if not c.elements or c.fit_r2 <= 0.0:
             continue
-        loc = by_loc[c.location]
-        segs = busiest(prep, split, loc.weights, settings.refine_blocks)
-        if loc.name not in base_err:
-            base_err[loc.name] = train_error(baseline, replace(c, elements=(), output=(), baseline=None), prep,
-                                             segs, warm, scale, bound)
-        e_c, e_0 = train_error(baseline, c, prep, segs, warm, scale, bound), base_err[loc.name]
+        if c.location not in at:
+            segs = busiest(prep, split, by_loc[c.location].weights, settings.refine_blocks)
+            try:
+                at[c.location] = segs, block_errors(baseline, baseline.model, prep, segs, warm, scale, (), bound)[1]
+            except NUMERIC_FAILURES:
+                at[c.location] = segs, np.inf
+        segs, e_0 = at[c.location]
+        e_c = train_error(baseline, c, prep, segs, warm, scale, bound)
         e = e_c / e_0 if 0 < e_0 < np.inf else (0.0 if np.isfinite(e_c) else np.inf)
         if c.cause not in by_sim or e < by_sim[c.cause][0]:
             by_sim[c.cause] = (e, c)
