@@ -118,20 +118,26 @@ def _divergence_bound(xs: np.ndarray) -> float:
 INTEGRATION_FS_HZ = 400.0  # integrate here: trapezoid error at 12.3 Hz is 0.3 % (1.2 % at 200 Hz)
 
 
+def decimation(cfg: RollingConfig) -> tuple[int, float, int]:
+    """(step to the integration rate, that rate, step from it to ``fs_ident_hz``): the two decimations
+    of ``window_coordinates``, which ``window_sample_index`` and ``ident_rate`` must follow exactly."""
+    step1 = max(1, int(cfg.fs_hz // INTEGRATION_FS_HZ))
+    fs1 = cfg.fs_hz / step1
+    return step1, fs1, max(1, int(round(fs1 / cfg.fs_ident_hz)))
+
+
 def window_coordinates(x: np.ndarray, cfg: RollingConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(base, z (n, 2), v (n, 2), r (n, 2)) at fs_ident_hz from unfiltered (N, 3) samples, ends trimmed.
 
     Zero-phase low-pass below 50 Hz, decimation to about 400 Hz, band-limited
     integration there, then decimation to ``fs_ident_hz``.
     """
-    step1 = max(1, int(cfg.fs_hz // INTEGRATION_FS_HZ))
-    fs1 = cfg.fs_hz / step1
+    step1, fs1, step2 = decimation(cfg)
     cut = min(50.0, 0.45 * min(fs1, cfg.fs_ident_hz))
     lp = lowpass_zero_phase(x, cfg.fs_hz, cut)[::step1]
     base = lp[:, 0]
     r = lp[:, 1:] - base[:, None]
     v, z = integrate_band(r, fs1, cfg.f_lo_hz)
-    step2 = max(1, int(round(fs1 / cfg.fs_ident_hz)))
     e = edge_samples(fs1, cfg.f_lo_hz)
     sl = slice(e, len(base) - e, step2)
     return base[sl], z[sl], v[sl], r[sl]
@@ -139,18 +145,16 @@ def window_coordinates(x: np.ndarray, cfg: RollingConfig) -> tuple[np.ndarray, n
 
 def window_sample_index(n_window: int, cfg: RollingConfig) -> np.ndarray:
     """Indices into the window's samples of the rows window_coordinates keeps (trimmed ends, decimated)."""
-    step1 = max(1, int(cfg.fs_hz // INTEGRATION_FS_HZ))
-    fs1 = cfg.fs_hz / step1
+    step1, fs1, step2 = decimation(cfg)
     n1 = len(range(0, n_window, step1))
-    step2 = max(1, int(round(fs1 / cfg.fs_ident_hz)))
     e = edge_samples(fs1, cfg.f_lo_hz)
     return np.arange(e, n1 - e, step2) * step1
 
 
 def ident_rate(cfg: RollingConfig) -> float:
-    step1 = max(1, int(cfg.fs_hz // INTEGRATION_FS_HZ))
-    fs1 = cfg.fs_hz / step1
-    return fs1 / max(1, int(round(fs1 / cfg.fs_ident_hz)))
+    """The rate of the window's coordinates (samples per second)."""
+    _, fs1, step2 = decimation(cfg)
+    return fs1 / step2
 
 
 class RollingIdentifier:
