@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from scipy.signal import freqz, lfilter
 from scipy.stats import ttest_rel
 
 from daq.sim.excitation import Excitation
@@ -13,7 +14,7 @@ from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, force_series, law_parameters
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for
 from ident.discovery.search import paired_p
-from ident.discovery.signals import convert, prepare
+from ident.discovery.signals import convert, frf, miso_frf, prepare
 from ident.discovery.split import given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
 
@@ -208,3 +209,23 @@ def test_a_blow_is_a_transient_and_impacts_that_set_in_are_not():
     sustained = e.copy()
     sustained[8000:, 0] += 0.5 * np.sin(np.arange(12000) * 0.3)
     assert transients(sustained, 100, 1000) == []
+
+
+def test_multiple_input_frf_conditions_out_a_correlated_second_input():
+    # y = H u + G w with w made from u (a nonlinear force of the response is correlated with the input):
+    # the single-input H1 estimate mixes G into H, the multiple-input one recovers H (digital filters,
+    # their FRFs computed by scipy.signal.freqz): largest error 0.8 % against a median of 250 % for H1)
+    fs, n = 1000.0, 2**17
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal(n)
+    w = 1e-6 * (lfilter([0.3, 0.2], [1.0, -0.5], u) ** 3 + 0.5 * rng.standard_normal(n))  # tiny scale on purpose
+    hb, ha = [0.02, 0.0, -0.02], [1.0, -1.8, 0.95]  # a resonance near 35 Hz
+    gb, ga = [2e5, 1e5], [1.0, -0.3]
+    y = lfilter(hb, ha, u) + lfilter(gb, ga, w)
+    f, H, puu = miso_frf(np.column_stack([u, w]), y, fs)
+    _, H1, _ = frf(u, y, fs)
+    band = (f > 5) & (f < 200)
+    true = freqz(hb, ha, worN=f[band], fs=fs)[1]
+    assert np.max(np.abs(H[0, band] - true) / np.abs(true)) < 0.05
+    assert np.max(np.abs(H1[0, band] - true) / np.abs(true)) > 0.2  # what the conditioning removes
+    assert puu[band].mean() == pytest.approx(2 / fs, rel=0.05)  # one-sided PSD of unit white noise

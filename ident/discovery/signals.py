@@ -123,6 +123,31 @@ def frf(u: np.ndarray, Y: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndar
     return f, H / np.where(puu > 0, puu, np.inf), puu
 
 
+def miso_frf(inputs: np.ndarray, Y: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Frequencies, the FRF (k, nf) of responses to the first of several inputs (n, p) with the others
+    conditioned out (multiple-input H1: H = S_xx^-1 S_xy per line), and the first input's PSD. With the
+    nonlinear forces of a structure as the other inputs, this is the underlying linear structure's FRF
+    (Adams & Allemang 2000, "A frequency domain method for estimating the parameters of a non-linear
+    structural dynamic model through feedback"; Noel & Kerschen 2017, sec. 4)."""
+    X = np.asarray(inputs, float).reshape(len(Y), -1)
+    Y = np.asarray(Y, float).reshape(len(X), -1)
+    s = np.maximum(X.std(axis=0), 1e-300)  # the inputs at unit variance: the ridge below is then relative
+    X = X / s
+    nper = welch_segment(len(X), fs_hz)
+    p, k = X.shape[1], Y.shape[1]
+    f = welch(X[:, 0], fs_hz, nperseg=nper)[0]
+    Sxx = np.empty((f.size, p, p), complex)
+    Sxy = np.empty((f.size, p, k), complex)
+    for a in range(p):
+        for b in range(p):
+            Sxx[:, a, b] = csd(X[:, a], X[:, b], fs_hz, nperseg=nper)[1]
+        for i in range(k):
+            Sxy[:, a, i] = csd(X[:, a], Y[:, i], fs_hz, nperseg=nper)[1]
+    ridge = 1e-9 * np.trace(Sxx, axis1=1, axis2=2).real[:, None, None] * np.eye(p)[None] + 1e-300 * np.eye(p)[None]
+    H = np.linalg.solve(Sxx + ridge, Sxy)  # (nf, p, k)
+    return f, H[:, 0, :].T / s[0], Sxx[:, 0, 0].real * s[0] ** 2
+
+
 def _percentile_f(f: np.ndarray, p: np.ndarray, q: float) -> float:
     c = np.cumsum(p)
     return float(f[min(len(f) - 1, int(np.searchsorted(c, q * c[-1])))])

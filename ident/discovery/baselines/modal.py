@@ -26,7 +26,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..model import NUMERIC_FAILURES, Element, LinearModel, lstsq, mode_states
-from ..signals import ORDER, Prepared, convert, frf
+from ..signals import ORDER, Prepared, convert, frf, impulsive, miso_frf
 from ..split import rows_of
 from . import Baseline, Location, dominant_mode, element_force
 
@@ -192,6 +192,27 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
         poles = np.asarray(poles0, complex)
     C, D, fit = solve(poles, rows)
     return poles, C, D, _nrmse(fit, prep.measured[rows])
+
+
+def underlying_poles(prep: Prepared, rows: np.ndarray, forces: list[np.ndarray], n_modes: int) -> np.ndarray | None:
+    """Poles of the underlying linear structure: vector fitting of its FRF estimated with the nonlinear
+    forces as extra inputs (``miso_frf``) over ``rows``, on the lines where the excitation carries power
+    in the band; None for a transient input or too few lines."""
+    u = prep.u[rows]
+    if impulsive(u) or not forces:
+        return None
+    hb = np.column_stack([convert(h, prep.fs_hz, prep.band, 0, 0)[rows] for h in forces])
+    f, H, puu = miso_frf(np.column_stack([u, hb]), prep.zva[0][rows], prep.fs_hz)
+    lo, hi = prep.band
+    inside = (f >= lo) & (f <= hi)
+    keep = inside & (puu > 1e-3 * puu[inside].max()) & np.all(np.isfinite(H), axis=0)
+    if keep.sum() < 4 * n_modes:
+        return None
+    try:
+        poles = vector_fit_poles(f[keep], H[:, keep], n_modes)
+    except NUMERIC_FAILURES:
+        return None
+    return poles if admissible(poles, prep) else None
 
 
 def gains_from_residues(C: np.ndarray, D: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -380,6 +401,15 @@ class ModalBaseline(Baseline):
         """The linear part fitted again with the forces (unit-coefficient laws on the location's measured
         coordinate) as extra inputs: the new baseline, each force's modal gains, and the fit's NRMSE."""
         poles, C, D, err = fit_with_forces(self.model.poles, prep, rows, forces)
+        # from the baseline's poles the fit can stop far from the linear part of strongly nonlinear data
+        # (independent seed 47, a hardening Duffing oscillator at 26.2 Hz with 1 % damping: 24.6 Hz with
+        # 10 %, fit error 0.28): it starts again from the modes of the underlying linear FRF, the forces
+        # conditioned out (26.0 Hz, then 26.3 Hz with 1.07 %, fit error 0.02), and keeps the better fit
+        start = underlying_poles(prep, rows, forces, poles.size)
+        if start is not None:
+            again = fit_with_forces(start, prep, rows, forces)
+            if again[3] < err:
+                poles, C, D, err = again
         scale = 1.0 / np.maximum(prep.measured[rows].std(axis=0), 1e-300)
         m = poles.size
         new = ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point,
