@@ -12,7 +12,7 @@ from daq.sim.sensors import to_counts
 from ident.live.regimes import (CROSS_BAND, CROSS_MARGIN, CROSS_MIN_WINDOWS, CROSS_QUANTILE, LABELS,
                                 PHASE_REFERENCE, PHASE_Z, Decision, RegimeConfig, RegimeMonitor, _cross_talk,
                                 _gap_evidence, _in_phase, _own_contact, decide, label_of, regime_start,
-                                regime_step)
+                                regime_step, spectral_features)
 from ident.live.scoring import score_regimes, true_changes
 
 FS = 2000.0
@@ -395,3 +395,13 @@ def test_the_in_phase_component_and_its_noise():
     assert _own_contact(((1.0, 0.01), (1.0, 0.01))) == (2.0 > PHASE_Z * np.sqrt(0.02))
     assert not _own_contact(((0.1, 0.01), (0.1, 0.01), (0.1, 0.01)))
     assert not _own_contact(((0.0, 0.0),))
+
+
+def test_the_envelope_is_the_change_of_amplitude_between_the_window_halves():
+    """A 40 Hz sine whose amplitude steps from 1 to 1.5 at the middle of a half-second window (ten periods in
+    either half): the envelope is log 1.5; a steady sine's is zero."""
+    t = np.arange(int(0.5 * FS)) / FS
+    sine = np.sin(2 * np.pi * 40.0 * t)
+    step = np.where(t < 0.25, 1.0, 1.5) * sine
+    assert spectral_features(np.column_stack([step] * 3), FS).envelope == pytest.approx(np.log(1.5), rel=1e-6)
+    assert spectral_features(np.column_stack([sine] * 3), FS).envelope == pytest.approx(0.0, abs=1e-9)
