@@ -9,9 +9,10 @@ import pytest
 from daq.sim.excitation import Kick, Step
 from daq.sim.rig import RigConfig, simulate_rig
 from daq.sim.sensors import to_counts
-from ident.live.regimes import (CROSS_BAND, CROSS_MARGIN, CROSS_MIN_WINDOWS, CROSS_QUANTILE, LABELS, Decision,
-                                RegimeConfig, RegimeMonitor, _cross_talk, _gap_evidence, decide, label_of,
-                                regime_start, regime_step)
+from ident.live.regimes import (CROSS_BAND, CROSS_MARGIN, CROSS_MIN_WINDOWS, CROSS_QUANTILE, LABELS,
+                                PHASE_REFERENCE, PHASE_Z, Decision, RegimeConfig, RegimeMonitor, _cross_talk,
+                                _gap_evidence, _in_phase, _own_contact, decide, label_of, regime_start,
+                                regime_step, spectral_features)
 from ident.live.scoring import score_regimes, true_changes
 
 FS = 2000.0
@@ -318,24 +319,30 @@ def test_the_gap_says_nothing_between_the_free_and_the_hitting_amplitudes():
     assert _gap_evidence(3.0e-3, np.full(10, 2.5e-3), hit, cfg)[1] == 0.0
 
 
-def two_tips(seconds, own1, c=4e-3, f=40.0, fs=FS, seed=0):
+def two_tips(seconds, own1, c=4e-3, f=40.0, fs=FS, seed=0, own=9.0, own_deg=90.0):
     """Base, tip 1, tip 2 [m/s^2]: a sine drive; tip 2 hits (its odd harmonics a tenth of its fundamental's
-    power); tip 1 carries the coupling's share c of tip 2's harmonic power and, from own1 on, 10 c of it."""
+    power); tip 1 carries the coupling's share c of tip 2's harmonic power in anti-phase (a free beam pulled
+    through a spring above its first mode answers as a mass) and, from own1 on, harmonics of its own of
+    ``own`` c of that power, ``own_deg`` degrees from tip 2's (90: the phase says nothing; 0: a contact)."""
     t = np.arange(int(seconds * fs)) / fs
     w = 2 * np.pi * f
     base = np.sin(w * t)
     fund = 20 * np.sin(w * t - np.radians(100))  # lags the base: a passive beam above resonance
-    harm = np.sqrt(0.1 / 2) * 20 * (np.sin(3 * w * t) + np.sin(5 * w * t))  # two harmonics: 0.1 of the power
-    scale = np.where(t < own1, np.sqrt(c), np.sqrt(10 * c))
+
+    def harm(deg):  # two harmonics: 0.1 of the fundamental's power
+        return np.sqrt(0.1 / 2) * 20 * (np.sin(3 * w * t + np.radians(deg)) + np.sin(5 * w * t + np.radians(deg)))
+
+    tip1 = fund - np.sqrt(c) * harm(0.0) + np.where(t < own1, 0.0, np.sqrt(own * c)) * harm(own_deg)
     noise = np.random.default_rng(seed).normal(0, 1e-3, (len(t), 3))
-    return np.column_stack([base, fund + scale * harm, fund + harm]) + noise
+    return np.column_stack([base, tip1, fund + harm(0.0)]) + noise
 
 
 def test_a_grazing_beam_beside_a_hitting_one_is_found_once_the_coupling_is_measured():
-    """Tip 1 first carries 0.4 % of tip 2's harmonic power (the coupling), then 4 %: within the configured
-    bound (5 %), so without the stream's measure of the coupling it is called free throughout; with it, the
-    share removed is twice the measured 0.4 % and the excess (3.2 % of tip 2's harmonics, 3.2e-3 of tip 1's
-    fundamental) calls beam 1 hitting."""
+    """Tip 1 first carries 0.4 % of tip 2's harmonic power (the coupling), then 4 % (its own harmonics in
+    quadrature with tip 2's, where their phase tells nothing): within the configured bound (5 %), so without
+    the stream's measure of the coupling it is called free throughout; with it, the share removed is twice the
+    measured 0.4 % and the excess (3.2 % of tip 2's harmonics, 3.2e-3 of tip 1's fundamental) calls beam 1
+    hitting."""
     c = 4e-3
     x = two_tips(60.0, own1=30.0, c=c)
     windows, _ = run_monitor(x)
@@ -350,3 +357,51 @@ def test_a_grazing_beam_beside_a_hitting_one_is_found_once_the_coupling_is_measu
     fresh, _ = run_monitor(two_tips(60.0, own1=0.0, c=c)[: int(10 * FS)])
     assert all(w.beams[0].cross_talk == RegimeConfig().cross_talk for w in fresh)
     assert all(w.label == "localized-2" for w in fresh if w.t_s > 1)
+
+
+def test_a_grazing_beam_is_told_from_the_coupling_by_the_phase_of_its_third_harmonic():
+    """From the first window, nothing measured: tip 1's harmonics in phase with tip 2's are its own contact
+    (none removed as the coupling's: its distortion is all of its 1.6 % of tip 2's harmonic power, 1.6e-3 of
+    its fundamental's, within the bound of 5 % that would otherwise hide it) and beam 1 is called hitting;
+    harmonics in anti-phase (0.4 %) are what the coupling carries into a free beam, and the bound removes
+    them."""
+    c = 4e-3
+    carried = two_tips(10.0, own1=0.0, c=c, own=0.0)  # 0.4 % of tip 2's power in anti-phase
+    windows, _ = run_monitor(carried)
+    assert all(w.label == "localized-2" for w in windows)
+    # removed as the coupling's: the bound, then (from 20 windows on) twice the share the stream measured
+    assert all(w.beams[0].cross_talk in (RegimeConfig().cross_talk, pytest.approx(CROSS_MARGIN[0] * c, rel=0.01))
+               for w in windows)
+    # in phase: the carried -sqrt(c) and the own 3 sqrt(c) make (3 - 1)^2 c = 4 c of tip 2's harmonic power
+    contact = two_tips(10.0, own1=0.0, c=c, own=9.0, own_deg=0.0)
+    windows, _ = run_monitor(contact)
+    assert windows[0].label == "impacting-both"  # the starting regime
+    assert all(w.label == "impacting-both" and w.beams[0].cross_talk == 0.0 for w in windows)
+    assert all(w.beams[0].distortion == pytest.approx(4 * c * 0.1, rel=0.01) for w in windows)
+
+
+def test_the_in_phase_component_and_its_noise():
+    """_in_phase against hand-computed numbers: beam 1's third harmonic 2 at 60 degrees from beam 2's (whose
+    sign is flipped), less the base's 0.1; the noise variance half the phasor's noise power; nothing where
+    beam 2's third harmonic does not stand PHASE_REFERENCE times above its noise."""
+    h = np.zeros((3, 3), complex)
+    h[2] = [0.1j, 2 * np.exp(1j * np.radians(60)), -5.0]  # base, tip 1, tip 2 (tip 2 mounted the other way up)
+    floor = [1e-6, 1e-6, 1e-6]
+    c, v = _in_phase(h, (1, -1), 0, floor, 4.0)
+    assert c == pytest.approx(2 * np.cos(np.radians(60)) - 0.1, rel=1e-12)
+    assert v == pytest.approx(0.5 * 4.0 * 1e-6, rel=1e-12)
+    assert _in_phase(h, (1, -1), 0, [1e-6, 1e-6, 25.0 / (PHASE_REFERENCE * 4.0)], 4.0) == (0.0, 0.0)
+    # the sum over recent windows against PHASE_Z deviations of its noise
+    assert _own_contact(((1.0, 0.01), (1.0, 0.01))) == (2.0 > PHASE_Z * np.sqrt(0.02))
+    assert not _own_contact(((0.1, 0.01), (0.1, 0.01), (0.1, 0.01)))
+    assert not _own_contact(((0.0, 0.0),))
+
+
+def test_the_envelope_is_the_change_of_amplitude_between_the_window_halves():
+    """A 40 Hz sine whose amplitude steps from 1 to 1.5 at the middle of a half-second window (ten periods in
+    either half): the envelope is log 1.5; a steady sine's is zero."""
+    t = np.arange(int(0.5 * FS)) / FS
+    sine = np.sin(2 * np.pi * 40.0 * t)
+    step = np.where(t < 0.25, 1.0, 1.5) * sine
+    assert spectral_features(np.column_stack([step] * 3), FS).envelope == pytest.approx(np.log(1.5), rel=1e-6)
+    assert spectral_features(np.column_stack([sine] * 3), FS).envelope == pytest.approx(0.0, abs=1e-9)
