@@ -26,7 +26,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..model import NUMERIC_FAILURES, Element, LinearModel, lstsq, mode_states
-from ..signals import ORDER, Prepared, convert, frf, impulsive, miso_frf
+from ..signals import ORDER, Prepared, convert, frf, miso_frf
 from ..split import rows_of
 from . import Baseline, Location, dominant_mode, element_force
 
@@ -197,10 +197,11 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
 def underlying_poles(prep: Prepared, rows: np.ndarray, forces: list[np.ndarray], n_modes: int) -> np.ndarray | None:
     """Poles of the underlying linear structure: vector fitting of its FRF estimated with the nonlinear
     forces as extra inputs (``miso_frf``) over ``rows``, on the lines where the excitation carries power
-    in the band; None for a transient input or too few lines."""
-    u = prep.u[rows]
-    if impulsive(u) or not forces:
+    in the band; None for a transient excitation (a record of hammer hits: Welch's averages assume a
+    stationary one; its training rows alone need not look impulsive) or too few lines."""
+    if prep.transient or not forces:
         return None
+    u = prep.u[rows]
     hb = np.column_stack([convert(h, prep.fs_hz, prep.band, 0, 0)[rows] for h in forces])
     f, H, puu = miso_frf(np.column_stack([u, hb]), prep.zva[0][rows], prep.fs_hz)
     lo, hi = prep.band
