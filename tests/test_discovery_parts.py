@@ -215,7 +215,7 @@ def test_a_blow_is_a_transient_and_impacts_that_set_in_are_not():
 def test_multiple_input_frf_conditions_out_a_correlated_second_input():
     # y = H u + G w with w made from u (a nonlinear force of the response is correlated with the input):
     # the single-input H1 estimate mixes G into H, the multiple-input one recovers H (digital filters,
-    # their FRFs computed by scipy.signal.freqz): largest error 0.8 % against a median of 250 % for H1)
+    # their FRFs computed by scipy.signal.freqz): largest error 0.8 %, against a median of 250 % for H1
     fs, n = 1000.0, 2**17
     rng = np.random.default_rng(0)
     u = rng.standard_normal(n)

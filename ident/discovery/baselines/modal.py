@@ -207,7 +207,7 @@ def underlying_poles(prep: Prepared, rows: np.ndarray, forces: list[np.ndarray],
     lo, hi = prep.band
     inside = (f >= lo) & (f <= hi)
     keep = inside & (puu > 1e-3 * puu[inside].max()) & np.all(np.isfinite(H), axis=0)
-    if keep.sum() < 4 * n_modes:
+    if keep.sum() < 4 * n_modes:  # as few lines per mode as the first fit's order search allows
         return None
     try:
         poles = vector_fit_poles(f[keep], H[:, keep], n_modes)
