@@ -445,38 +445,29 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
         return train_error(baseline, cand, prep, segs, warm, scale, bound), cand
 
     best = (base_err, c)
-    starts = [(shape0, 0.0)]
+    grid = []  # (shape, log stiffness factor) tried on the two busiest blocks before the simplex
     if cause.code == CONTACT:
-        # scan side, gap and stiffness on the two busiest blocks: the regression sees displacement smoothed
-        # by the band, so it finds a soft stopper at a smaller gap; a stiff one at the true gap fits the
-        # simulation as well, and only a scan that tries stiff stoppers finds it
+        # scan side, gap and stiffness: the regression sees displacement smoothed by the band, so it finds a
+        # soft stopper at a smaller gap; a stiff one at the true gap fits the simulation as well, and only a
+        # scan that tries stiff stoppers finds it
         gap0 = float(shape0["gap"])
         w2 = float(np.max(np.abs(baseline.model.poles)) ** 2)
         k0 = max(c.parameters["stiffness_per_mass"], 1e-300)
         levels = sorted({0.0} | {float(np.clip(np.log(f * w2 / k0), -reach, reach)) for f in (10.0, 100.0)})
-        scan = []
-        for side in SIDES:
-            for fct in np.linspace(0.6, 1.6, 11):
-                for lk in levels:
-                    shp = {"gap": gap0 * fct, "side": side}
-                    cand = _scaled(c, baseline, loc, np.full(n_el, lk), shp)
-                    scan.append((train_error(baseline, cand, prep, segs[:2], warm, scale, bound), shp, lk))
-        scan.sort(key=lambda s: s[0])
-        starts = [(shp, lk) for _, shp, lk in scan[:2]]
+        grid = [({"gap": gap0 * fct, "side": side}, lk)
+                for side in SIDES for fct in np.linspace(0.6, 1.6, 11) for lk in levels]
     elif cause.code == JOINT:
         # scan the slip onset with the slip and stiffness: the regression sees a joint slipping from rest,
         # a preloaded one slips only near the largest motion, and a residual regression cannot tell the
         # two apart (its best fit of a late onset is a force that destabilises the simulation)
         slip0 = float(shape0["slip"])
-        scan = []
-        for onset in ONSETS:
-            for fct in (0.5, 1.0, 2.0, 4.0):
-                for lk in (0.0, 1.0, 2.0):
-                    shp = {"slip": slip0 * fct, "onset": onset}
-                    cand = _scaled(c, baseline, loc, np.full(n_el, lk), shp)
-                    scan.append((train_error(baseline, cand, prep, segs[:2], warm, scale, bound), shp, lk))
-        scan.sort(key=lambda s: s[0])
-        starts = [(shp, lk) for _, shp, lk in scan[:2]]
+        grid = [({"slip": slip0 * fct, "onset": onset}, lk)
+                for onset in ONSETS for fct in (0.5, 1.0, 2.0, 4.0) for lk in (0.0, 1.0, 2.0)]
+    starts = [(shape0, 0.0)]
+    if grid:
+        scan = sorted(((train_error(baseline, _scaled(c, baseline, loc, np.full(n_el, lk), shp), prep, segs[:2],
+                                    warm, scale, bound), i) for i, (shp, lk) in enumerate(grid)))
+        starts = [grid[i] for _, i in scan[:2]]
     for shp, lk in starts:
         free = [k for k in ("gap", "slip") if k in shp]
 
