@@ -11,8 +11,8 @@ from daq.sim.rig import RigConfig, simulate_rig
 from daq.sim.sensors import to_counts
 from ident.live.regimes import (CROSS_BAND, CROSS_MARGIN, CROSS_MIN_WINDOWS, CROSS_QUANTILE, LABELS,
                                 PHASE_REFERENCE, PHASE_Z, Decision, RegimeConfig, RegimeMonitor, _cross_talk,
-                                _gap_evidence, _in_phase, _own_contact, decide, label_of, regime_start,
-                                regime_step, spectral_features)
+                                _gap_evidence, _half_phasors, _in_phase, _own_contact, decide, label_of,
+                                regime_start, regime_step, spectral_features)
 from ident.live.scoring import score_regimes, true_changes
 
 FS = 2000.0
@@ -405,3 +405,20 @@ def test_the_envelope_is_the_change_of_amplitude_between_the_window_halves():
     step = np.where(t < 0.25, 1.0, 1.5) * sine
     assert spectral_features(np.column_stack([step] * 3), FS).envelope == pytest.approx(np.log(1.5), rel=1e-6)
     assert spectral_features(np.column_stack([sine] * 3), FS).envelope == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("n_windows, n", [(1, 1000), (2, 1000), (3, 251), (40, 500)])
+def test_the_halves_phasors_are_numpys_bit_for_bit(n_windows, n):
+    """The compiled phasors of the window halves give the numpy expression they replace, bit for bit (the
+    envelope compares them against a threshold): the halves' Hann windows on the fundamental's basis,
+    einsum's products and sums, the mean removed as numpy's."""
+    rng = np.random.default_rng(n_windows)
+    xs = rng.standard_normal((n_windows, n, 3)) * [1.0, 30.0, 0.01] + [5.0, -2.0, 0.3]
+    f = rng.uniform(5.0, 40.0, n_windows)
+    basis = np.exp(-2j * np.pi * f[:, None, None] * np.arange(1, 4)[:, None] * np.arange(n) / FS)  # (W, 3, n)
+    m = n // 2
+    centred = xs - xs.mean(axis=1, keepdims=True)
+    want = [np.einsum("wt,wtc->wc", basis[:, 0, k:k + m] * np.hanning(m), centred[:, k:k + m]) for k in (0, m)]
+    got = _half_phasors(xs, basis, np.hanning(m))
+    for h in (0, 1):
+        np.testing.assert_array_equal(got[h].view(float), want[h].view(float))
