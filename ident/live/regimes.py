@@ -381,9 +381,10 @@ def spectral_batch(xs: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) 
     peak, the band sums and the floor's order statistic, the halves' phasors at f) runs in compiled
     kernels (``_windowed``, ``_power``, ``_bands``, ``_half_phasors``) that reproduce numpy's order of
     operations; the FFT is scipy's (numpy's pocketfft numbers, faster on a batch of rows), the harmonics'
-    basis and its product with the window numpy's. The features are bit for bit those of the plain per-window numpy expressions the monitor had
-    (every window of ``daq bench --regimes``' cached cases and of the recordings was checked); in numpy,
-    one window at a time, they took half the monitor's time in calls on small arrays.
+    basis and its product with the window numpy's. The features are bit for bit those of the plain
+    per-window numpy expressions the monitor had (every window of ``daq bench --regimes``' cached cases
+    and of the recordings was checked); in numpy, one window at a time, they took half the monitor's
+    time in calls on small arrays.
     """
     xs = np.require(xs, float, "CW")  # one compiled signature
     n_w, n = xs.shape[0], xs.shape[1]
