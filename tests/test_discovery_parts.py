@@ -203,13 +203,24 @@ def test_splits_hold_out_two_blocks_in_five_and_refuse_overlap():
 def test_a_blow_is_a_transient_and_impacts_that_set_in_are_not():
     rng = np.random.default_rng(0)
     e = 0.01 * rng.standard_normal((20000, 1))
+    decay = np.exp(-np.arange(400) / 80.0)
     blow = e.copy()
-    blow[8000:8400, 0] += np.exp(-np.arange(400) / 80.0)
-    onsets = transients(blow, 100, 1000)
-    assert len(onsets) == 1 and abs(onsets[0] - 8000) <= 100
+    blow[8000:8400, 0] += decay
+    spans = transients(blow, 100, 1000)
+    assert len(spans) == 1 and abs(spans[0][0] - 8000) <= 100 and 8300 <= spans[0][1] <= 8700
+    # two blows 1.5 windows of ``longest`` apart, and one 300 samples before the record ends: all three
+    three = e.copy()
+    for t0 in (5000, 6500):
+        three[t0:t0 + 400, 0] += decay
+    three[19700:, 0] += decay[:300]
+    assert [abs(a - t0) <= 100 for (a, _), t0 in zip(transients(three, 100, 1000), (5000, 6500, 19700))] == [True] * 3
     sustained = e.copy()
     sustained[8000:, 0] += 0.5 * np.sin(np.arange(12000) * 0.3)
     assert transients(sustained, 100, 1000) == []
+    # a sweep through a resonance: the error grows over several windows and falls again, no blow
+    passage = e.copy()
+    passage[:, 0] += 0.5 * np.exp(-(((np.arange(20000) - 9000) / 600.0) ** 2)) * np.sin(np.arange(20000) * 0.3)
+    assert transients(passage, 100, 3000) == []
 
 
 def test_multiple_input_frf_conditions_out_a_correlated_second_input():

@@ -209,10 +209,11 @@ def force_responses(model: LinearModel, prep: Prepared, h: np.ndarray, gains: li
 
 def baseline_residual(baseline: Baseline, prep: Prepared, split: Split, warm: int) -> np.ndarray:
     """Measured minus the baseline over the record (band-passed): simulated once from the state at the
-    first training block when the baseline is linear, block by block when it has elements of its own."""
+    first training block when the baseline is linear, block by block when it has elements of its own or
+    unmeasured blows struck (each block from the state read off the data before it)."""
     res = np.full((prep.n, len(prep.names)), np.nan)
     model = baseline.model
-    if model.elements:
+    if model.elements or prep.blows:
         for seg in split.train:
             res[seg] = prep.measured[seg] - predict(baseline, model, prep, seg, warm)
         return res

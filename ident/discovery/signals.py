@@ -248,6 +248,7 @@ class Prepared:
     driving_point: int | None = None
     excitation_kind: str = "force"
     transient: bool = False  # a hammer-hit record
+    blows: tuple[int, ...] = ()  # samples where unmodelled blows strike: free responses start there
 
     @property
     def n(self) -> int:

@@ -8,7 +8,10 @@ one sample of the paired test that decides a finding.
 
 Unmodelled inputs (a hammer blow on the structure, a jump between coexisting states) are transients
 the measured input cannot produce. ``transients`` finds them as isolated bursts of the baseline's
-error; the blocks they reach are left out of training and scoring, and the report names them.
+error (each block predicted from the state read off the data before it, so a burst ends with the
+block it strikes in, or the next); the blocks they reach are left out of scoring and of the causes'
+training, a modal baseline is fitted again with a free response from each blow on, and the report
+names them.
 """
 
 from __future__ import annotations
@@ -78,32 +81,58 @@ def given(n: int, edge: int, train: slice, test: slice) -> Split:
     return Split(blocks, tuple(i for i, b in enumerate(blocks) if b is not tr))
 
 
-def transients(error: np.ndarray, window: int, settle: int, ratio: float = 20.0) -> list[int]:
-    """Sample indices where the error (n, k) bursts and dies away: a window whose RMS (the largest over
-    responses, each scaled by its median window RMS) exceeds ``ratio`` times the median of the 20
-    windows before it, while the error ``settle`` to 2 ``settle`` samples later is back below twice that
-    median. An effect that sets in and stays (impacts from some amplitude on) is not a transient."""
+def transients(error: np.ndarray, window: int, longest: int, ratio: float = 8.0) -> list[tuple[int, int]]:
+    """Sample spans (start, stop) where the error (n, k) bursts and dies away, as a blow's does; start is
+    the first sample of the burst's first window, or of the window before, above four times the median.
+
+    The error is taken in windows of ``window`` samples (a window's value: the largest RMS over
+    responses, each scaled by its median window RMS). A burst starts at a window above ``ratio`` times
+    the median of the 20 windows before it, where the window before is below three times that median
+    (a blow strikes at once; a nonlinearity that grows with the amplitude, a sweep reaching a resonance,
+    rises over several windows); its first window holds at least half its peak (a free decay is largest
+    at its start; a blow on one beam reaches the other's sensor through the coupling a few periods
+    later) and it ends where the error is back below twice the median, within ``longest`` samples (or
+    it fades, to below half its peak, before the record ends). An effect that sets in and stays
+    (impacts from some amplitude on) is not a transient."""
     e = np.asarray(error, float)
     n = e.shape[0] // window
     if n < 5:
         return []
     w = np.sqrt(np.mean(e[:n * window].reshape(n, window, -1) ** 2, axis=1))
-    w = np.max(w / np.maximum(np.median(w, axis=0), 1e-300), axis=1)
-    k1 = max(1, settle // window)
+    typical = np.maximum(np.median(w, axis=0), 1e-300)
+    w = np.max(w / typical, axis=1)
+    a = np.max(np.abs(e) / typical, axis=1)  # each sample's size on the same scale
+    span = max(2, -(-longest // window))
     out = []
-    for i in range(1, n - 2 * k1):
+    i = 1
+    while i < n:
         before = float(np.median(w[max(0, i - 20):i]))
-        if w[i] > ratio * before and w[i] >= w[max(0, i - 20):i + k1].max() \
-                and float(np.median(w[i + k1:i + 2 * k1])) < 2 * before:
-            out.append(i * window)
+        if not (w[i] > ratio * before and w[i - 1] < 3 * before):
+            i += 1
+            continue
+        below = np.flatnonzero(w[i + 1:i + 1 + span] < 2 * before)
+        stop = i + 1 + int(below[0]) if below.size else None
+        tail = w[i:min(n, i + 1 + span)]
+        if stop is None and i + span < n:  # still high after the longest a transient lasts: not one
+            i += 1
+            continue
+        if stop is None:  # the record ends inside the burst: a transient if it is fading
+            stop = n
+            if float(np.median(tail[-3:])) >= 0.5 * float(tail.max()):
+                break
+        if w[i] >= 0.5 * float(w[i:stop].max()):
+            out.append((_strike(a, (i - 1) * window, (i + 1) * window, 4 * before), stop * window))
+        i = stop
     return out
 
 
-def blocks_reached(split: Split, onsets: list[int], settle: int) -> list[int]:
-    """Blocks that a transient starting at each onset reaches before it has decayed (``settle`` samples)."""
-    hit = set()
-    for t0 in onsets:
-        for k, b in enumerate(split.blocks):
-            if b.start < t0 + settle and b.stop > t0:
-                hit.add(k)
-    return sorted(hit)
+def _strike(a: np.ndarray, lo: int, hi: int, level: float) -> int:
+    """The first sample in [lo, hi) above ``level`` (the blow's instant, to the sample: its free response
+    starts there), else ``lo``."""
+    above = np.flatnonzero(a[lo:hi] > level)
+    return lo + int(above[0]) if above.size else lo
+
+
+def blocks_reached(split: Split, spans: list[tuple[int, int]]) -> list[int]:
+    """Blocks that overlap a transient's span."""
+    return sorted({k for start, stop in spans for k, b in enumerate(split.blocks) if b.start < stop and b.stop > start})

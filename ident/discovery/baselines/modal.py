@@ -34,15 +34,25 @@ MAX_MODES = 12
 BASIS_MODES = 3  # modes per location whose gains the search fits separately (no driving point)
 
 
-def _design(poles, states, drive, t, order: int) -> np.ndarray:
-    """Real design matrix (n, 4m) of one output of kinematic ``order``: columns for Re C, Im C (forced
-    response, with the feedthrough of the modal input ``drive`` (n, m)) and for the free response."""
+def _design(poles, states, drive, t, order: int, starts=()) -> np.ndarray:
+    """Real design matrix (n, 4m + 2m len(starts)) of one output of kinematic ``order``: columns for
+    Re C, Im C (forced response, with the feedthrough of the modal input ``drive`` (n, m)), for the free
+    response of the record's initial state, and for the free response from each of ``starts`` (s) on:
+    an unmeasured blow leaves the structure with a modal state nobody measured, which decays like any."""
     lam = poles[None, :]
     forced = lam**order * states
     if order >= 1:
         forced = forced + lam ** (order - 1) * drive
-    free = lam**order * np.exp(lam * t[:, None])
-    return np.hstack([2 * forced.real, -2 * forced.imag, 2 * free.real, -2 * free.imag])
+    cols = [2 * forced.real, -2 * forced.imag]
+    for t0 in (0.0, *starts):
+        after = t[:, None] >= t0
+        free = np.where(after, lam**order * np.exp(lam * np.where(after, t[:, None] - t0, 0.0)), 0.0)
+        cols += [2 * free.real, -2 * free.imag]
+    return np.hstack(cols)
+
+
+def _starts(prep: Prepared) -> tuple[float, ...]:
+    return tuple(b / prep.fs_hz for b in prep.blows)
 
 
 def _inputs(poles, prep: Prepared, elements: tuple[Element, ...], forces) -> tuple[np.ndarray, np.ndarray]:
@@ -71,7 +81,7 @@ def fit_residues(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements: 
     fit = np.empty((rows.size if at is None else at.size, len(prep.names)))
     for i, kind in enumerate(prep.kinds):
         o = ORDER[kind]
-        X = _design(poles, states[rows], drive[rows], rows / prep.fs_hz, o)
+        X = _design(poles, states[rows], drive[rows], rows / prep.fs_hz, o, _starts(prep))
         y = prep.measured[rows, i] - (prep.base[rows, o] if prep.base_excited else 0.0)
         sol = lstsq(X, y)
         C[i] = sol[:m] + 1j * sol[m:2 * m]
@@ -153,9 +163,10 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
         C = np.empty((len(prep.names), m), complex)
         D = [np.empty((len(prep.names), m), complex) for _ in hb]
         fit = np.empty((sub.size, len(prep.names)))
+        first = 2 * m * (2 + len(prep.blows))  # the forced and free responses' columns come first
         for i, kind in enumerate(prep.kinds):
             o = ORDER[kind]
-            X = [_design(poles, states[0], drives[0], t, o)]
+            X = [_design(poles, states[0], drives[0], t, o, _starts(prep))]
             X += [_design(poles, sq, dq, t, o)[:, :2 * m] for sq, dq in zip(states[1:], drives[1:])]
             X = np.hstack(X)
             y = prep.measured[sub, i] - (prep.base[sub, o] if prep.base_excited else 0.0)
@@ -164,7 +175,7 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
             sol = lstsq(X, y)
             C[i] = sol[:m] + 1j * sol[m:2 * m]
             for j in range(len(hb)):
-                q = sol[4 * m + 2 * m * j:4 * m + 2 * m * (j + 1)]
+                q = sol[first + 2 * m * j:first + 2 * m * (j + 1)]
                 D[j][i] = q[:m] + 1j * q[m:]
             fit[:, i] = X @ sol + (prep.base[sub, o] if prep.base_excited else 0.0)
         return C, D, fit
