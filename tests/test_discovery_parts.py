@@ -203,20 +203,25 @@ def test_splits_hold_out_two_blocks_in_five_and_refuse_overlap():
 def test_a_blow_is_a_transient_and_impacts_that_set_in_are_not():
     rng = np.random.default_rng(0)
     e = 0.01 * rng.standard_normal((20000, 1))
-    decay = np.exp(-np.arange(400) / 80.0)
+    decay = np.exp(-np.arange(400) / 300.0) * np.sin(np.arange(400) * 2 * np.pi / 100)  # 5 % damping
     blow = e.copy()
     blow[8000:8400, 0] += decay
     spans = transients(blow, 100, 1000)
     assert len(spans) == 1 and abs(spans[0][0] - 8000) <= 100 and 8300 <= spans[0][1] <= 8700
-    # two blows 1.5 windows of ``longest`` apart, and one 300 samples before the record ends: all three
+    # two blows 1.5 times ``longest`` apart, and one 1,000 samples before the record ends: all three
     three = e.copy()
     for t0 in (5000, 6500):
         three[t0:t0 + 400, 0] += decay
-    three[19700:, 0] += decay[:300]
-    assert [abs(a - t0) <= 100 for (a, _), t0 in zip(transients(three, 100, 1000), (5000, 6500, 19700))] == [True] * 3
+    three[19000:, 0] += np.exp(-np.arange(1000) / 300.0) * np.sin(np.arange(1000) * 2 * np.pi / 100)
+    starts = [a for a, _ in transients(three, 100, 1000)]
+    assert len(starts) == 3 and np.all(np.abs(np.array(starts) - (5000, 6500, 19000)) <= 100)
     sustained = e.copy()
     sustained[8000:, 0] += 0.5 * np.sin(np.arange(12000) * 0.3)
     assert transients(sustained, 100, 1000) == []
+    # one window's spike (a step of a stepped sine met by a nonlinearity) is over before a free decay is
+    spike = e.copy()
+    spike[8000:8100, 0] += 0.15 * np.sin(np.arange(100) * 0.3)
+    assert transients(spike, 100, 1000) == []
     # a sweep through a resonance: the error grows over several windows and falls again, no blow
     passage = e.copy()
     passage[:, 0] += 0.5 * np.exp(-(((np.arange(20000) - 9000) / 600.0) ** 2)) * np.sin(np.arange(20000) * 0.3)
