@@ -215,6 +215,11 @@ def test_a_blow_is_a_transient_and_impacts_that_set_in_are_not():
     three[19000:, 0] += np.exp(-np.arange(1000) / 300.0) * np.sin(np.arange(1000) * 2 * np.pi / 100)
     starts = [a for a, _ in transients(three, 100, 1000)]
     assert len(starts) == 3 and np.all(np.abs(np.array(starts) - (5000, 6500, 19000)) <= 100)
+    # the same burst where the measured excitation bursts too (a recorded hammer hit): the input's doing
+    hit = 0.01 * rng.standard_normal(20000)
+    hit[7990:8010] += 5.0
+    assert len(transients(blow, 100, 1000, excitation=0.01 * rng.standard_normal(20000))) == 1
+    assert transients(blow, 100, 1000, excitation=hit) == []
     sustained = e.copy()
     sustained[8000:, 0] += 0.5 * np.sin(np.arange(12000) * 0.3)
     assert transients(sustained, 100, 1000) == []

@@ -120,7 +120,8 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     longest = 2 * max(b.stop - b.start for b in split.blocks) + warm
     # (not in the first block's warm-up: its start is read off too little data to tell a blow from it)
     spans = [(int(rows[0] + a), int(rows[0] + b))
-             for a, b in transients(np.nan_to_num(resid_all[rows]), period, longest) if a >= warm]
+             for a, b in transients(np.nan_to_num(resid_all[rows]), period, longest, excitation=prep.u[rows])
+             if a >= warm]
     onsets = [a for a, _ in spans]
     if spans:
         hit = blocks_reached(split, spans)

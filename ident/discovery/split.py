@@ -81,7 +81,8 @@ def given(n: int, edge: int, train: slice, test: slice) -> Split:
     return Split(blocks, tuple(i for i, b in enumerate(blocks) if b is not tr))
 
 
-def transients(error: np.ndarray, window: int, longest: int, ratio: float = 8.0) -> list[tuple[int, int]]:
+def transients(error: np.ndarray, window: int, longest: int, ratio: float = 8.0,
+               excitation: np.ndarray | None = None) -> list[tuple[int, int]]:
     """Sample spans (start, stop) where the error (n, k) bursts and dies away, as a blow's does; start is
     the first sample of the burst's first window, or of the window before, above four times the median.
 
@@ -93,9 +94,12 @@ def transients(error: np.ndarray, window: int, longest: int, ratio: float = 8.0)
     at its start; a blow on one beam reaches the other's sensor through the coupling a few periods
     later), the window after it at least 40 % of it (a free decay outlasts a period of the slowest mode:
     a single window's spike is not a blow; independent seeds 59 and 70, spikes of 9-12 x falling to
-    17-25 % in the next window, where blows keep 64-95 %) and it ends where the error is back below twice the median, within ``longest`` samples (or
-    it fades, to below half its peak, before the record ends). An effect that sets in and stays
-    (impacts from some amplitude on) is not a transient."""
+    17-25 % in the next window, where blows keep 64-95 %) and it ends where the error is back below
+    twice the median, within ``longest`` samples (or it fades, to below half its peak, before the record
+    ends). An effect that sets in and stays (impacts from some amplitude on) is not a transient, and
+    neither is a burst where the measured ``excitation`` (n,) bursts too (a recorded hammer hit the
+    baseline answers wrongly: independent seed 66): its window RMS, in the burst's first window or the
+    one on either side, above three times its median over the 20 windows before."""
     e = np.asarray(error, float)
     n = e.shape[0] // window
     if n < 5:
@@ -105,6 +109,9 @@ def transients(error: np.ndarray, window: int, longest: int, ratio: float = 8.0)
     w = np.max(w / typical, axis=1)
     a = np.max(np.abs(e) / typical, axis=1)  # each sample's size on the same scale
     span = max(2, -(-longest // window))
+    x = None
+    if excitation is not None:
+        x = np.sqrt(np.mean(np.asarray(excitation, float)[:n * window].reshape(n, window) ** 2, axis=1))
     out = []
     i = 1
     while i < n:
@@ -122,7 +129,8 @@ def transients(error: np.ndarray, window: int, longest: int, ratio: float = 8.0)
             stop = n
             if float(np.median(tail[-3:])) >= 0.5 * float(tail.max()):
                 break
-        if w[i] >= 0.5 * float(w[i:stop].max()) and (i + 1 >= n or w[i + 1] >= 0.4 * w[i]):
+        driven = x is not None and x[max(0, i - 1):i + 2].max() > 3 * float(np.median(x[max(0, i - 20):i]))
+        if w[i] >= 0.5 * float(w[i:stop].max()) and (i + 1 >= n or w[i + 1] >= 0.4 * w[i]) and not driven:
             out.append((_strike(a, (i - 1) * window, (i + 1) * window, 4 * before), stop * window))
         i = stop
     return out
