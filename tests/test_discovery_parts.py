@@ -251,7 +251,7 @@ def test_a_blow_is_a_transient_and_impacts_that_set_in_are_not():
     sustained = e.copy()
     sustained[8000:, 0] += 0.5 * np.sin(np.arange(12000) * 0.3)
     assert transients(sustained, 100, 1000) == []
-    # one window's spike (a step of a stepped sine met by a nonlinearity) is over before a free decay is
+    # one window's spike (as the band-pass's edge made at a block's end) is over before a free decay is
     spike = e.copy()
     spike[8000:8100, 0] += 0.15 * np.sin(np.arange(100) * 0.3)
     assert transients(spike, 100, 1000) == []

@@ -93,13 +93,14 @@ def transients(error: np.ndarray, window: int, longest: int, ratio: float = 8.0,
     rises over several windows); its first window holds at least half its peak (a free decay is largest
     at its start; a blow on one beam reaches the other's sensor through the coupling a few periods
     later), the window after it at least 40 % of it (a free decay outlasts a period of the slowest mode:
-    a single window's spike is not a blow; independent seeds 59 and 70, spikes of 9-12 x falling to
-    17-25 % in the next window, where blows keep 64-95 %) and it ends where the error is back below
+    a single window's spike is not a blow; the spikes of 9-12 x that the band-pass's edge made at block
+    ends, before the detector's predictions ran on past them, fell to 17-25 % in the next window on
+    independent seeds 59 and 70, where blows keep 64-95 %) and it ends where the error is back below
     twice the median, within ``longest`` samples (or it fades, to below half its peak, before the record
     ends). An effect that sets in and stays (impacts from some amplitude on) is not a transient, and
     neither is a burst where the measured ``excitation`` (n,) bursts too (a recorded hammer hit the
-    baseline answers wrongly: independent seed 66): its window RMS, in the burst's first window or the
-    one on either side, above three times its median over the 20 windows before."""
+    baseline answers wrongly): its window RMS, in the burst's first window or the one on either side,
+    above three times its median over the 20 windows before."""
     e = np.asarray(error, float)
     n = e.shape[0] // window
     if n < 5:
