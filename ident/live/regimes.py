@@ -434,19 +434,27 @@ def spectral_batch(xs: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) 
 
 
 @njit(cache=True, nogil=True)
+def _column_means(x, out):  # pragma: no cover - compiled
+    """x.mean(axis=0) of one window x (n, c) into out (c,), as numpy's axis-0 mean of a C-contiguous array
+    does it: the rows added in order, then divided by n."""
+    n, c = x.shape
+    out[:] = 0.0
+    for i in range(n):
+        for j in range(c):
+            out[j] += x[i, j]
+    for j in range(c):
+        out[j] = out[j] / n
+
+
+@njit(cache=True, nogil=True)
 def _windowed(xs, w):  # pragma: no cover - compiled
-    """(x - x.mean(axis=0)) * w[:, None] of every window x in xs (W, n, c), transposed to (W, c, n): numpy's
-    axis-0 mean of a C-contiguous array adds the rows in order and divides by n, which is what this does."""
+    """(x - x.mean(axis=0)) * w[:, None] of every window x in xs (W, n, c), transposed to (W, c, n), the mean
+    as numpy takes it (``_column_means``)."""
     n_w, n, c = xs.shape
     out = np.empty((n_w, c, n))
     m = np.empty(c)
     for q in range(n_w):
-        m[:] = 0.0
-        for i in range(n):
-            for j in range(c):
-                m[j] += xs[q, i, j]
-        for j in range(c):
-            m[j] = m[j] / n
+        _column_means(xs[q], m)
         for i in range(n):
             for j in range(c):
                 out[q, j, i] = (xs[q, i, j] - m[j]) * w[i]
@@ -458,7 +466,7 @@ def _half_phasors(xs, basis, w_half):  # pragma: no cover - compiled
     """The phasors at f of either half of every window x in xs (W, n, c), (2, W, c): for k = 0 and m
     (m = n // 2), np.einsum("wt,wtc->wc", basis[:, 0, k:k + m] * w_half, centred[:, k:k + m]), with centred
     = xs - xs.mean(axis=1, keepdims=True) and basis (W, H, n) complex, row 0 the fundamental's. Bit for bit
-    numpy's: the mean as in ``_windowed``; a complex times a real as numpy's complex product with the real
+    numpy's: the mean as in ``_column_means``; a complex times a real as numpy's complex product with the real
     promoted (imaginary part zero), in the product with the window and in einsum's, which adds the terms in
     order from zero (checked on random batches of 1-300 windows of 250-2,500 samples; tests/test_regimes.py
     keeps checking). In numpy, a block's two windows spent 80 us here, a fifth of their spectra."""
@@ -467,12 +475,7 @@ def _half_phasors(xs, basis, w_half):  # pragma: no cover - compiled
     out = np.zeros((2, n_w, c), np.complex128)
     mean = np.empty(c)
     for q in range(n_w):
-        mean[:] = 0.0
-        for i in range(n):
-            for j in range(c):
-                mean[j] += xs[q, i, j]
-        for j in range(c):
-            mean[j] = mean[j] / n
+        _column_means(xs[q], mean)
         for h in range(2):
             k = h * m
             for j in range(c):

@@ -45,8 +45,8 @@ def _design(poles, states, drive, t, order: int, starts=()) -> np.ndarray:
         forced = forced + lam ** (order - 1) * drive
     cols = [2 * forced.real, -2 * forced.imag]
     for t0 in (0.0, *starts):
-        after = t[:, None] >= t0
-        free = np.where(after, lam**order * np.exp(lam * np.where(after, t[:, None] - t0, 0.0)), 0.0)
+        since = t[:, None] - t0
+        free = np.where(since >= 0, lam**order * np.exp(lam * np.maximum(since, 0.0)), 0.0)
         cols += [2 * free.real, -2 * free.imag]
     return np.hstack(cols)
 
