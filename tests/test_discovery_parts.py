@@ -13,7 +13,8 @@ from ident.cli.bench_discovery import independent_case
 from ident.discovery.baselines.modal import ModalBaseline, fit_model, underlying_poles
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, force_series, law_parameters
-from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for
+from ident.discovery.baselines import Location
+from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
 from ident.discovery.search import paired_p, predict
 from ident.discovery.signals import convert, frf, impulsive, miso_frf, prepare
 from ident.discovery.split import given, interleaved, transients
@@ -107,6 +108,39 @@ def test_contact_pushes_and_never_pulls():
     v = np.array([0.0, 0.0, -10.0, 0.0, 0.0])
     f = force_series(CONTACT, p, z, v)
     assert f.tolist() == [0.0, pytest.approx(20.0), 0.0, pytest.approx(-50.0), pytest.approx(100.0)]
+
+
+def test_a_stopper_on_a_fit_with_complex_residues_cannot_feed_its_own_velocity():
+    # a modal fit's residues carry a phase a structure's do not; a force entering through gains built
+    # from them moves its coordinate's velocity at once (2 Re(lz . gain) != 0), and a stiff stopper then
+    # drives a first-order loop that grows at that times its stiffness: independent seed 60's stopper
+    # simulated to 1e249. Without that part, a stopper in a free decay can only take energy out
+    lin, m, w, zeta = _sdof()
+    fs, n = 1000.0, 3000
+    fit = LinearModel(lin.poles, lin.B, lin.C * np.exp(-0.3j))  # the same mode, its residue 0.3 rad off
+    loc = Location("tip", np.array([1.0]))
+    raw = loc.lz(fit) * 2j * fit.poles.imag  # the gain basis of a force at a response without a driving point
+    (basis,) = ModalBaseline(fit, None).gain_basis(loc)
+    lz = loc.lz(fit)
+    assert abs(np.real(np.sum(lz * raw))) > 0.5 * np.abs(lz * raw).sum()  # sin(2 x 0.3 rad) of it
+    assert abs(np.real(np.sum(lz * basis))) < 1e-12 * np.abs(lz * basis).sum()
+    # real residues: nothing to take away, the gain as it was
+    assert np.array_equal(without_feedthrough(loc.lz(lin), loc.lz(lin) * 2j * lin.poles.imag),
+                          loc.lz(lin) * 2j * lin.poles.imag)
+    w0 = np.array([5e-3 / (2 * fit.C[0, 0])])  # 5 mm from rest, free decay
+    p = law_parameters(CAUSES["contact"], {"gap": 1e-3, "side": "both"})
+    per_mass = ModalBaseline(fit, None).per_mass(loc, basis)
+    p[0] = 50 * w * w / per_mass  # a stopper 50 x the mode's stiffness
+    bound = 1.0
+    y = {}
+    for name, g in (("raw", raw), ("consistent", basis)):
+        model = fit.with_elements((Element(CONTACT, p, lz, g),))
+        sub = substeps_for(model, fs, 5e-3, 5e-3 * w)
+        y[name] = simulate(model, np.zeros(n), fs, [(0, 0)], w0=w0, substeps=sub, bound=bound)[:, 0]
+    assert not np.all(np.isfinite(y["raw"]))  # left the bound: grew from 5 mm past 1 m
+    assert np.all(np.isfinite(y["consistent"]))
+    assert np.max(np.abs(y["consistent"])) <= 5e-3 * (1 + 1e-9)
+    assert np.max(np.abs(y["consistent"][-500:])) < 1e-3  # rung down onto the free range
 
 
 @pytest.mark.parametrize("onset", [0.0, 0.4, 0.8])

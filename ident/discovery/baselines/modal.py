@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..model import NUMERIC_FAILURES, Element, LinearModel, lstsq, mode_states
+from ..model import NUMERIC_FAILURES, Element, LinearModel, lstsq, mode_states, without_feedthrough
 from ..signals import ORDER, Prepared, convert, frf, miso_frf
 from ..split import rows_of
 from . import Baseline, Location, dominant_mode, element_force
@@ -378,14 +378,14 @@ class ModalBaseline(Baseline):
             # the band, with a large residue, switch every structural mode off)
             cd = self.model.C[self.driving_point]
             ok = np.abs(cd) >= 0.05 * np.abs(self.model.C).max(axis=0)
-            return [np.where(ok, lz / np.where(ok, cd, 1.0), 0.0)]
+            return [without_feedthrough(lz, np.where(ok, lz / np.where(ok, cd, 1.0), 0.0))]
         out = []
         for r in self._modes(lz):
             e = np.zeros(m, complex)
             e[r] = lz[r] * self._omega2i()[r]
-            out.append(e)
+            out.append(without_feedthrough(lz, e))
             if self.complex_gains:
-                out.append(1j * e)
+                out.append(without_feedthrough(lz, 1j * e))
         return out
 
     def per_mass(self, loc: Location, gain: np.ndarray) -> float:
@@ -426,7 +426,8 @@ class ModalBaseline(Baseline):
         m = poles.size
         new = ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point,
                             self.complex_gains, err)
-        return new, [gains_from_residues(C, d, scale) for d in D], err
+        lz = loc.lz(new.model)
+        return new, [without_feedthrough(lz, gains_from_residues(C, d, scale)) for d in D], err
 
     def refit(self, prep: Prepared, segments, elements: tuple[Element, ...]) -> "ModalBaseline":
         rows = rows_of(segments)
