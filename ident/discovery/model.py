@@ -77,10 +77,12 @@ def without_feedthrough(lz: np.ndarray, gain: np.ndarray) -> np.ndarray:
     A structure's coordinate answers a force through its mass, in acceleration; its velocity cannot
     jump. In a model with real modes (or complex ones scaled by a complex participation) each mode's
     lz_r gain_r is imaginary; a modal fit's complex residues break that, and a stiffness acting through
-    such gains feeds its coordinate's velocity with its own displacement, a first-order loop that grows
-    at |2 Re(lz . gain)| x the stiffness whatever the stiffness's sign (independent seed 60: a modal fit
-    with a 18 Hz pseudo-mode at 24 % damping, a stopper found where it is, 41 % of the residual explained,
-    and every simulation with it growing to 1e249 in a block)."""
+    such gains feeds its coordinate's velocity with its own displacement, a first-order loop of rate
+    2 Re(lz . gain) x the stiffness that grows or damps by the sign of the residues' phase error, not by
+    the physics (independent seed 60: a modal fit with an 18 Hz pseudo-mode at 24 % damping, a stopper
+    found where it is, 41 % of the residual explained, and every simulation with it growing to 1e249 in
+    a block). The physical gain of mode r is a real multiple of i conj(lz_r), whatever the excitation's
+    complex participation; a gain of that form comes back as it was (to rounding; real residues exactly)."""
     lz = np.asarray(lz, complex)
     gain = np.asarray(gain, complex)
     mag = np.abs(lz) ** 2
