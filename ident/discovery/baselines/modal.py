@@ -344,19 +344,16 @@ class ModalBaseline(Baseline):
     causes = ("contact", "cubic_stiffness", "quadratic_stiffness", "coulomb_friction", "quadratic_damping",
               "hysteretic_joint", "linear_mismatch", "clipping")
 
-    def __init__(self, model: LinearModel, driving_point: int | None, complex_gains: bool = False,
-                 fit_nrmse: float = np.nan):
+    def __init__(self, model: LinearModel, driving_point: int | None, fit_nrmse: float = np.nan):
         self.model = model
         self.driving_point = driving_point
-        self.complex_gains = complex_gains
         self.fit_nrmse = fit_nrmse
 
     @classmethod
     def fit(cls, prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
             poles0: np.ndarray | None = None, check: np.ndarray | None = None) -> "ModalBaseline":
         model, err = fit_model(prep, rows, max_modes, poles0, check)
-        return cls(model, prep.driving_point if prep.excitation_kind == "force" else None,
-                   prep.excitation_kind == "voltage", err)
+        return cls(model, prep.driving_point if prep.excitation_kind == "force" else None, err)
 
     def _omega2i(self) -> np.ndarray:
         return 2j * self.model.poles.imag
@@ -379,13 +376,14 @@ class ModalBaseline(Baseline):
             cd = self.model.C[self.driving_point]
             ok = np.abs(cd) >= 0.05 * np.abs(self.model.C).max(axis=0)
             return [without_feedthrough(lz, np.where(ok, lz / np.where(ok, cd, 1.0), 0.0))]
+        # one real coefficient per mode: without its feedthrough a mode's gain is a real multiple of
+        # i conj(lz_r), whatever the excitation's participation (a second, complex coefficient for a
+        # voltage-driven shaker's complex participation would be the same direction again)
         out = []
         for r in self._modes(lz):
             e = np.zeros(m, complex)
             e[r] = lz[r] * self._omega2i()[r]
             out.append(without_feedthrough(lz, e))
-            if self.complex_gains:
-                out.append(without_feedthrough(lz, 1j * e))
         return out
 
     def per_mass(self, loc: Location, gain: np.ndarray) -> float:
@@ -424,8 +422,7 @@ class ModalBaseline(Baseline):
                 poles, C, D, err = again
         scale = 1.0 / np.maximum(prep.measured[rows].std(axis=0), 1e-300)
         m = poles.size
-        new = ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point,
-                            self.complex_gains, err)
+        new = ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point, err)
         lz = loc.lz(new.model)
         return new, [without_feedthrough(lz, gains_from_residues(C, d, scale)) for d in D], err
 
@@ -440,7 +437,7 @@ class ModalBaseline(Baseline):
             return self
         m = poles.size
         return ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point,
-                             self.complex_gains, _nrmse(fit, prep.measured[rows]))
+                             _nrmse(fit, prep.measured[rows]))
 
 
 def estimate_state(model: LinearModel, prep: Prepared, start: int, stop: int) -> np.ndarray:
