@@ -10,7 +10,7 @@ from daq.sim.excitation import Excitation
 from daq.sim.rig import RigConfig, simulate_rig
 from ident.discovery import Channel, Measurement
 from ident.cli.bench_discovery import independent_case
-from ident.discovery.baselines.modal import ModalBaseline, fit_model, underlying_poles
+from ident.discovery.baselines.modal import ModalBaseline, drivable, fit_model, underlying_poles
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, force_series, law_parameters
 from ident.discovery.baselines import Location
@@ -141,6 +141,35 @@ def test_a_stopper_on_a_fit_with_complex_residues_cannot_feed_its_own_velocity()
     assert np.all(np.isfinite(y["consistent"]))
     assert np.max(np.abs(y["consistent"])) <= 5e-3 * (1 + 1e-9)
     assert np.max(np.abs(y["consistent"][-500:])) < 1e-3  # rung down onto the free range
+
+
+def test_a_force_drives_only_modes_the_record_resolves():
+    # a fit keeps poles no structure has: a sinusoid at a stepped sine's line (zeta 1e-12) and a pole
+    # far below the band fitting the drift of integrated accelerations. A force at a location drives
+    # neither: unmasked, such a pole's unbounded resonance made it the location's only mode
+    lin, m, w, zeta = _sdof()
+    fs, n = 500.0, 10000  # 20 s: a decay rate of 1 / 20 s is the least a mode can have
+    t = np.arange(n) / fs
+    F = np.random.default_rng(3).standard_normal(n)
+    acc = simulate(lin, F, fs, [(0, 2)])
+    prep = prepare(Measurement(fs, Channel("F", "force", F), (Channel("x", "acceleration", acc[:, 0]),)), (4.0, 40.0))
+    line = 2 * np.pi * 14.0 * (-1e-12 + 1j)
+    drift = 2 * np.pi * 0.02 * (-1e-6 + 1j)
+    slow = 2 * np.pi * 12.0 * (-0.5 / (2 * np.pi * 12.0 * t[-1]) + 1j)  # decays by e^-0.5 over the record
+    poles = np.array([lin.poles[0], line, drift, slow])
+    fit = LinearModel(poles, np.ones((1, 4), complex), np.array([[lin.C[0, 0], 1e-3j, 100.0, 1e-3j]]))
+    mask = drivable(poles, prep)
+    assert mask.tolist() == [True, False, False, False]
+    loc = Location("x", np.array([1.0]))
+    (unmasked,) = ModalBaseline(fit, None).gain_basis(loc)
+    assert np.flatnonzero(unmasked).tolist() == [2]  # the drift pole alone (its 1 / zeta is unbounded)
+    (basis,) = ModalBaseline(fit, None, drivable=mask).gain_basis(loc)
+    assert np.flatnonzero(basis).tolist() == [0]
+    # per unit modal mass: the mode's own, as on the one-mode model (lz 2 i omega_d = 1 / m)
+    (own,) = ModalBaseline(lin, None).gain_basis(loc)
+    assert ModalBaseline(fit, None, drivable=mask).per_mass(loc, basis) == pytest.approx(np.real(own[0]) / m)
+    (reciprocal,) = ModalBaseline(fit, 0, drivable=mask).gain_basis(loc)  # the driving point: reciprocity
+    assert np.flatnonzero(reciprocal).tolist() == [0]
 
 
 @pytest.mark.parametrize("onset", [0.0, 0.4, 0.8])

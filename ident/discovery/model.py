@@ -85,9 +85,10 @@ def without_feedthrough(lz: np.ndarray, gain: np.ndarray) -> np.ndarray:
     complex participation; a gain of that form comes back as it was (to rounding; real residues exactly)."""
     lz = np.asarray(lz, complex)
     gain = np.asarray(gain, complex)
-    mag = np.abs(lz) ** 2
-    safe = np.where(mag > 0, mag, 1.0)
-    return np.where(mag > 0, gain - np.real(lz * gain) * np.conj(lz) / safe, gain)
+    with np.errstate(over="ignore", invalid="ignore"):  # a pseudo-mode's lz can be 1e160 (its gain is 0)
+        mag = np.abs(lz) ** 2
+        safe = np.where(mag > 0, mag, 1.0)
+        return np.where(mag > 0, gain - np.real(lz * gain) * np.conj(lz) / safe, gain)
 
 
 def output_coefficients(model: LinearModel, outputs):

@@ -32,6 +32,7 @@ from . import Baseline, Location, dominant_mode, element_force
 
 MAX_MODES = 12
 BASIS_MODES = 3  # modes per location whose gains the search fits separately (no driving point)
+RESOLVED = 1.0  # decay rate times record length below which a pole is a sinusoid, not a mode
 
 
 def _design(poles, states, drive, t, order: int, starts=()) -> np.ndarray:
@@ -113,6 +114,19 @@ def structural(poles: np.ndarray, prep: Prepared) -> np.ndarray:
     power in."""
     f = np.abs(poles) / (2 * np.pi)
     return (-poles.real / np.maximum(np.abs(poles), 1e-300) < 0.3) & (f >= prep.band[0]) & (f <= prep.band[1])
+
+
+def drivable(poles: np.ndarray, prep: Prepared) -> np.ndarray:
+    """Which modes a force at a location may drive: structural ones whose decay the record resolves
+    (zeta_r |lambda_r| x its duration >= ``RESOLVED``).
+
+    A fit keeps poles no structure has, because they cut its error: an undamped pole at a stepped sine's
+    line (independent seed 0: 17.8 Hz at zeta 1e-229), one far below the band that fits the drift of
+    integrated accelerations (seed 5: 0.015 Hz, a residue 1e5 times the modes'). Given a force's gain,
+    the first rated the location's one mode (its resonance 1 / zeta is unbounded) and the second made
+    every element's simulation leave its bound (35 of 38 candidates)."""
+    zeta = -poles.real / np.maximum(np.abs(poles), 1e-300)
+    return structural(poles, prep) & (zeta * np.abs(poles) * prep.n / prep.fs_hz >= RESOLVED)
 
 
 def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(), forces=(),
@@ -344,16 +358,21 @@ class ModalBaseline(Baseline):
     causes = ("contact", "cubic_stiffness", "quadratic_stiffness", "coulomb_friction", "quadratic_damping",
               "hysteretic_joint", "linear_mismatch", "clipping")
 
-    def __init__(self, model: LinearModel, driving_point: int | None, fit_nrmse: float = np.nan):
+    def __init__(self, model: LinearModel, driving_point: int | None, fit_nrmse: float = np.nan,
+                 drivable: np.ndarray | None = None):
         self.model = model
         self.driving_point = driving_point
         self.fit_nrmse = fit_nrmse
+        # the modes a force may drive (``drivable``); all of them when none qualifies
+        mask = np.ones(model.poles.size, bool) if drivable is None else np.asarray(drivable, bool)
+        self.drivable = mask if mask.any() else np.ones(model.poles.size, bool)
 
     @classmethod
     def fit(cls, prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
             poles0: np.ndarray | None = None, check: np.ndarray | None = None) -> "ModalBaseline":
         model, err = fit_model(prep, rows, max_modes, poles0, check)
-        return cls(model, prep.driving_point if prep.excitation_kind == "force" else None, err)
+        return cls(model, prep.driving_point if prep.excitation_kind == "force" else None, err,
+                   drivable(model.poles, prep))
 
     def _omega2i(self) -> np.ndarray:
         return 2j * self.model.poles.imag
@@ -363,7 +382,8 @@ class ModalBaseline(Baseline):
         ``BASIS_MODES``, each moving the coordinate at least 10 % as much as the first."""
         p = self.model.poles
         score = np.abs(lz) / (np.maximum(-p.real / np.abs(p), 1e-4) * np.abs(p))
-        order = np.argsort(score)[::-1]
+        score = np.where(self.drivable, score, -1.0)
+        order = np.argsort(score)[::-1][:int(self.drivable.sum())]
         return np.array([r for r in order[:BASIS_MODES] if score[r] >= 0.1 * score[order[0]]], int)
 
     def gain_basis(self, loc: Location) -> list[np.ndarray]:
@@ -374,7 +394,7 @@ class ModalBaseline(Baseline):
             # the mode's largest (a threshold against all modes' largest let one wide pseudo-mode below
             # the band, with a large residue, switch every structural mode off)
             cd = self.model.C[self.driving_point]
-            ok = np.abs(cd) >= 0.05 * np.abs(self.model.C).max(axis=0)
+            ok = (np.abs(cd) >= 0.05 * np.abs(self.model.C).max(axis=0)) & self.drivable
             return [without_feedthrough(lz, np.where(ok, lz / np.where(ok, cd, 1.0), 0.0))]
         # one real coefficient per mode: without its feedthrough a mode's gain is a real multiple of
         # i conj(lz_r), whatever the excitation's participation (a second, complex coefficient for a
@@ -388,7 +408,7 @@ class ModalBaseline(Baseline):
 
     def per_mass(self, loc: Location, gain: np.ndarray) -> float:
         lz = loc.lz(self.model)
-        r = dominant_mode(lz, self.model.poles)
+        r = dominant_mode(lz * self.drivable, self.model.poles)
         x = lz[r] * self._omega2i()[r]
         if abs(x) == 0:
             return float("nan")
@@ -399,7 +419,7 @@ class ModalBaseline(Baseline):
         if self.driving_point is None:
             return None
         lz = loc.lz(self.model)
-        r = dominant_mode(lz, self.model.poles)
+        r = dominant_mode(lz * self.drivable, self.model.poles)
         cd = self.model.C[self.driving_point, r]
         inv = float(np.real(lz[r] ** 2 * self._omega2i()[r] / cd)) if cd != 0 else 0.0
         return 1.0 / inv if inv > 0 else None
@@ -422,9 +442,12 @@ class ModalBaseline(Baseline):
                 poles, C, D, err = again
         scale = 1.0 / np.maximum(prep.measured[rows].std(axis=0), 1e-300)
         m = poles.size
-        new = ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point, err)
+        new = ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point, err,
+                            drivable(poles, prep))
         lz = loc.lz(new.model)
-        return new, [without_feedthrough(lz, gains_from_residues(C, d, scale)) for d in D], err
+        with np.errstate(over="ignore", invalid="ignore"):  # a pseudo-mode's residue can be 1e160
+            gains = [np.where(new.drivable, gains_from_residues(C, d, scale), 0.0) for d in D]
+        return new, [without_feedthrough(lz, g) for g in gains], err
 
     def refit(self, prep: Prepared, segments, elements: tuple[Element, ...]) -> "ModalBaseline":
         rows = rows_of(segments)
@@ -437,7 +460,7 @@ class ModalBaseline(Baseline):
             return self
         m = poles.size
         return ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point,
-                             _nrmse(fit, prep.measured[rows]))
+                             _nrmse(fit, prep.measured[rows]), drivable(poles, prep))
 
 
 def estimate_state(model: LinearModel, prep: Prepared, start: int, stop: int) -> np.ndarray:
