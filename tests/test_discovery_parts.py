@@ -17,7 +17,7 @@ from ident.discovery.baselines import Location
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
 from ident.discovery.search import paired_p, predict
 from ident.discovery.signals import convert, frf, impulsive, miso_frf, prepare
-from ident.discovery.split import given, interleaved, transients
+from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
 
 
@@ -289,6 +289,29 @@ def test_splits_hold_out_two_blocks_in_five_and_refuse_overlap():
     assert not set(s.rows("train")) & set(s.rows("test"))
     with pytest.raises(ValueError, match="overlap"):
         given(10000, 100, slice(0, 6000), slice(5000, 10000))
+
+
+def test_a_decays_blocks_hold_equal_shares_of_its_energy():
+    # a hammer hit's decay, e^(-2 t / tau) in energy with tau = 0.2 s, in a 4 s record at 10 kHz
+    fs, tau, edge = 10000.0, 0.2, 300
+    t = np.arange(40000) / fs
+    energy = np.exp(-2 * t / tau)
+    s = by_energy(energy, edge, 20)
+    assert len(s.blocks) == 20 and s.held_out == (2, 4, 7, 9, 12, 14, 17, 19)
+    assert s.blocks[0].start == edge and s.blocks[-1].stop == 40000 - edge
+    assert all(a.stop == b.start for a, b in zip(s.blocks, s.blocks[1:]))
+    # the k-th block ends where the energy past the edge has fallen to 1 - k / 20 of it (analytic)
+    e0, e_end = np.exp(-2 * edge / fs / tau), np.exp(-2 * (40000 - edge) / fs / tau)
+    for k in range(1, 20):
+        t_k = -tau / 2 * np.log(e0 - (e0 - e_end) * k / 20)
+        assert s.blocks[k - 1].stop / fs == pytest.approx(t_k, abs=1.5 / fs)
+    # equal blocks in time hold out only the tail; these hold out the decay's start
+    assert interleaved(40000, edge, 20).test[0].start / fs > 0.2
+    assert s.test[0].start / fs < 0.05
+    # a block never shorter than its minimum (a few periods of the slowest mode)
+    s = by_energy(energy, edge, 250)
+    assert len(s.blocks) == 20 and all(b.stop - b.start >= 250 for b in s.blocks)
+    assert s.blocks[-1].stop == 40000 - edge
 
 
 def test_a_blow_is_a_transient_and_impacts_that_set_in_are_not():

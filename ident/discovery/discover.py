@@ -29,7 +29,7 @@ from .search import (Candidate, Scoring, Selection, Settings, baseline_residual,
                      clipping_candidates, gain_candidates, offset_findings, paired_p, predict, refine, regress, score,
                      significant, train_error)
 from .signals import Measurement, Prepared, modal_band, prepare
-from .split import Split, blocks_reached, given, interleaved, rows_of, transients
+from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
 
 PIECE_PERIODS = 5  # periods of the slowest mode per piece of the paired test
@@ -68,15 +68,20 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
 
 
 def _split(prep: Prepared, train: slice | None = None, test: slice | None = None) -> Split:
-    """The given train and test ranges, else interleaved blocks of ``BLOCK_PERIODS`` periods of the
-    slowest mode (the band's low edge is 0.4 x its frequency)."""
+    """The given train and test ranges, else interleaved blocks of at least ``BLOCK_PERIODS`` periods of
+    the slowest mode (the band's low edge is 0.4 x its frequency): equal in time, or on a hammer-hit
+    record equal in the motion's energy (``split.by_energy``)."""
     if train is not None or test is not None:
         n = prep.n
         tr = train or slice(0, int(0.6 * n))
         te = test or slice(tr.stop, n)
         return given(n, prep.edge, tr, te)
     block_s = BLOCK_PERIODS * 0.4 / float(prep.band[0])
-    return interleaved(prep.n, prep.edge, max(int(block_s * prep.fs_hz), 16))
+    min_block = max(int(block_s * prep.fs_hz), 16)
+    if prep.transient:  # a hammer hit: blocks of equal shares of the motion, not of time
+        scale = np.maximum(prep.measured.std(axis=0), 1e-300)
+        return by_energy(np.sum((prep.measured / scale) ** 2, axis=1), prep.edge, min_block)
+    return interleaved(prep.n, prep.edge, min_block)
 
 
 def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurement | None = None,
