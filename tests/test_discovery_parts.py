@@ -170,6 +170,12 @@ def test_a_force_drives_only_modes_the_record_resolves():
     assert ModalBaseline(fit, None, drivable=mask).per_mass(loc, basis) == pytest.approx(np.real(own[0]) / m)
     (reciprocal,) = ModalBaseline(fit, 0, drivable=mask).gain_basis(loc)  # the driving point: reciprocity
     assert np.flatnonzero(reciprocal).tolist() == [0]
+    # an element reads its coordinate in those modes only: read through the drift pole, the coordinate's
+    # velocity would follow the input 2 Re(b . lz) = 200-fold (zero for a structure: the one mode's is)
+    lz = ModalBaseline(fit, None, drivable=mask).coordinate_modes(loc)
+    assert lz.tolist() == [lin.C[0, 0], 0, 0, 0]
+    assert 2 * np.real(np.sum(fit.B[0] * loc.lz(fit))) == pytest.approx(200.0)
+    assert abs(2 * np.real(np.sum(fit.B[0] * lz))) == pytest.approx(0.0, abs=1e-12)
 
 
 @pytest.mark.parametrize("onset", [0.0, 0.4, 0.8])

@@ -248,7 +248,7 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
     tt = float(target @ target)
     if tt <= 0:
         return None
-    lz = loc.lz(model)
+    lz = baseline.coordinate_modes(loc)
     found = []
     for shp, cols in shapes(cause, z, v):
         X = np.concatenate([force_responses(model, prep, cols[:, c], gains)[rows] / scale[None, :, None]
@@ -281,7 +281,7 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
             own, jg, err = baseline.fit_jointly(prep, rows, loc, [cols[:, c] for c in range(cols.shape[1])])
         except NUMERIC_FAILURES:
             continue
-        lz2 = loc.lz(own.model)
+        lz2 = own.coordinate_modes(loc)
         els = tuple(Element(cause.code, law_parameters(cause, shp, c), lz2, g, loc.weights)
                     for c, g in enumerate(jg))
         pm = [own.per_mass(loc, el.gain) for el in els]

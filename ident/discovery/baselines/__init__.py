@@ -5,6 +5,7 @@ excitation moves the responses, plus what the search needs to extend it:
 
 - ``locations()``: where an internal force can act: at a response (against the ground or the shaken
   frame) or between two responses (their difference; their sum when neither sign is known);
+- ``coordinate_modes(loc)``: the modal coefficients of the coordinate an element there reads;
 - ``gain_basis(loc)``: modal gain vectors of a unit force at the location; the search fits one
   coefficient per vector (one when the model has physical units or a driving point is known, one per
   mode otherwise);
@@ -85,6 +86,10 @@ class Baseline:
 
     def locations(self, prep: Prepared) -> list[Location]:
         return default_locations(prep)
+
+    def coordinate_modes(self, loc: Location) -> np.ndarray:
+        """Modal coefficients of the coordinate a force at the location reads and acts on."""
+        return loc.lz(self.model)
 
     def gain_basis(self, loc: Location) -> list[np.ndarray]:
         raise NotImplementedError
