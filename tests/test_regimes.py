@@ -266,6 +266,20 @@ def test_windows_inside_the_hysteresis_band_neither_count_nor_break_the_dwell():
     assert changes == [4 + 1]
 
 
+def test_a_beam_that_leaves_clearly_is_a_change_while_the_other_grazes():
+    cfg = RegimeConfig(dwell=2, max_dwell=8, hysteresis=0.2)
+    start = [(HIT, HIT)] * 4  # impacting-both
+    # beam 1 leaves its stopper clearly; beam 2 stays hitting by hysteresis with p inside the band. Only
+    # beam 1 changes, and its windows are clear: reported at the dwell's second window, not at max_dwell
+    # (independent regime seed 1012 reported such a change 31 s late)
+    labels, changes = decided(start + [(FREE, GRAZE)] * 6, cfg)
+    assert changes == [4 + 1] and labels[-1] == "localized-2"
+    # the beam that changes lingering inside the band is still no evidence: free after one clear window,
+    # then p = 0.4 (free by hysteresis, unclear), so the change waits for max_dwell as before
+    labels, changes = decided(start + [(0.25, HIT)] + [(0.4, HIT)] * 8, cfg)
+    assert changes == [4 + 8 - 1] and labels[-1] == "localized-2"
+
+
 def test_true_changes_ignore_flicker():
     codes = np.array([0] * 300 + [2, 0] * 20 + [2] * 300 + [3] * 50 + [2] * 300)
     tc = true_changes(codes, fs_hz=100.0, min_run_s=1.0)

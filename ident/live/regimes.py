@@ -71,7 +71,7 @@ to +-1.5, down to -3 far below the amplitudes seen hitting) or the config's (-2 
 beam's probability of hitting is the logistic, its confidence max(p, 1 - p). The decision
 (``decide``) adds hysteresis and a dwell: a beam switches to hitting above p = 0.5 + ``hysteresis``
 and back at or below 0.5 - ``hysteresis``, and a new regime is reported once it has been the
-window's label in ``dwell`` clear windows (every beam's p outside that band) without another label
+window's label in ``dwell`` clear windows (the p of every beam that changes outside that band) without another label
 in between, or in ``max_dwell`` windows of any kind; the first window reports the starting regime.
 The thresholds were set on generated rigs (seeds 0-30 of daq.sim.independent) other than those
 ``daq bench --regimes`` reports (seeds from 1000).
@@ -137,6 +137,11 @@ _FLOOR_NORM = -np.log(1 - FLOOR_QUANTILE)  # a white floor's mean power over its
 
 def label_of(hit1: bool, hit2: bool) -> str:
     return LABELS[int(hit1) + 2 * int(hit2)]
+
+
+def _hits_of(label: str) -> tuple[bool, bool]:
+    i = LABELS.index(label)
+    return bool(i & 1), bool(i & 2)
 
 
 @dataclass(frozen=True)
@@ -234,8 +239,9 @@ def decide(prev: Decision, p: tuple[float, float], cfg: RegimeConfig) -> tuple[D
       when p <= 0.5 - h (h = ``cfg.hysteresis``). The pair of states gives the window's label.
     - **Dwell**: a label other than the reported regime is reported once it has been the label of
       ``cfg.dwell`` *clear* windows with no other label in between, or of ``cfg.max_dwell`` windows of
-      any kind. A window is clear when every beam's p lies outside the hysteresis band [0.5 - h, 0.5 + h],
-      i.e. when it would set the beams' states whatever they were before. Windows with p inside the band
+      any kind. A window is clear when the p of every beam whose state differs from the reported regime
+      (of every beam, while none does) lies outside the hysteresis band [0.5 - h, 0.5 + h], i.e. when it
+      would set those beams' states whatever they were before. Windows with p inside the band
       (a beam grazing its stopper, the beating while a drive change passes) keep the label they inherit
       from the hysteresis but neither count towards the dwell nor break it: a regime that only flickers
       in through the band is not reported, a change that the data shows clearly is reported at exactly
@@ -253,7 +259,12 @@ def decide(prev: Decision, p: tuple[float, float], cfg: RegimeConfig) -> tuple[D
     h = cfg.hysteresis
     hit = tuple(bool(pi > 0.5 - h) if was else bool(pi > 0.5 + h) for pi, was in zip(p, prev.hit))
     raw = label_of(*hit)
-    clear = all(pi > 0.5 + h or pi <= 0.5 - h for pi in p)
+    # the evidence for a change is carried by the beams that change: one beam leaving its stopper clearly
+    # while the other grazes inside the band counts (independent regime seed 1012: both -> beam 2 alone
+    # for 1.26 s, beam 1 clearly free, beam 2's p inside the band, so no window was clear)
+    was = _hits_of(prev.label)
+    moving = [i for i in range(2) if hit[i] != was[i]] or [0, 1]
+    clear = all(p[i] > 0.5 + h or p[i] <= 0.5 - h for i in moving)
     if not prev.started:
         return Decision(hit, raw, raw, 1, int(clear), True), False
     held, n_clear = (prev.held + 1, prev.clear + int(clear)) if raw == prev.candidate else (1, int(clear))
