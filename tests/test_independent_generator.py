@@ -175,7 +175,10 @@ def _energy(model, q, qd, elements):
 def test_energy_is_conserved_without_damping():
     """Free vibration of an undamped cantilever from a 4 mm tip deflection, a two-sided stopper (300 times
     the static stiffness, no damping) and a cubic spring: energy drift < 1e-4 at four times the default
-    step rate, and it falls with the step like RK4's numerical dissipation (order >= 4)."""
+    step rate, and it falls with the step like RK4's numerical dissipation (order >= 4 over two halvings
+    of the step: where a contact closes falls at another point of a step at each rate, so a single
+    halving's ratio scatters; measured 58, 14, 38, 29 for successive halvings with numpy 2.4.6 and scipy
+    1.17.1, about 2^5 on average)."""
     spec = _cantilever()
     bm = assemble_beam(spec)
     model = reduce(Structure(bm.mass, bm.stiffness, np.zeros_like(bm.mass)), 1000.0, 4)
@@ -194,7 +197,7 @@ def test_energy_is_conserved_without_damping():
         e = _energy(model, r.modal_q, r.modal_qd, elements)
         drift[mult] = np.max(np.abs(e - e[0])) / e[0]
     assert drift[4] < 1e-4
-    assert drift[1] / drift[2] > 16 and drift[2] / drift[4] > 16
+    assert drift[1] > drift[2] > drift[4] and drift[1] / drift[4] > 16**2
     smooth = simulate(model, base, 2 * base, [], elements[1:], [], initial=initial, record_every=1)
     e = _energy(model, smooth.modal_q, smooth.modal_qd, elements[1:])
     assert np.max(np.abs(e - e[0])) / e[0] < 1e-6
