@@ -342,12 +342,13 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
             C, fit = fit_residues(poles, prep, rows, at=check)
         except NUMERIC_FAILURES:
             break
-        if not np.any(structural(poles, prep)):  # nothing resonates: no order to choose
+        resonant = structural(poles, prep)
+        if not np.any(resonant):  # nothing resonates: no order to choose
             continue
         # with one response, two modes closer than their bandwidths are one mode gliding with amplitude
         # (independent seed 64, a clamped-clamped beam's hardening hammer decay: 192.6 and 195.1 Hz where
         # the beam has one mode at 185.8 Hz, and the cubic then lost to a quadratic stiffness)
-        if len(prep.names) == 1 and _unresolved_pair(poles[structural(poles, prep)], prep.fs_hz / prep.n):
+        if len(prep.names) == 1 and _unresolved_pair(poles[resonant], prep.fs_hz / prep.n):
             misses += 1
             if misses == 2:
                 break
