@@ -33,7 +33,7 @@ from .excitation import Hammer, Hit, LinearGain, Scaled, Signal, Sweep, band_ran
 from .experiment import Drive, Run, Setup, base_velocity, run
 from .integrate import Coil, Output
 from .modal import normal_modes, reduce
-from .recording import Case
+from .recording import Case, seeded
 from .rig import Rig, build_rig
 from .sensors import UNITS, acquire
 from .structures import ChainSpec, chain_structure, clamped_clamped_beam, duffing_structure, relative, unit
@@ -463,6 +463,7 @@ def _truth(draft: Draft, cause: str, params: dict, generic: dict, r: Run, stats:
     return truth
 
 
+@seeded
 def discovery_case(seed: int, family: str | None = None, cause: str | None = None) -> Case:
     """A seeded discovery case; family and cause are drawn unless given."""
     rng = np.random.default_rng(seed)

@@ -4,6 +4,11 @@
 and `truth.csv` when the case has per-sample truth; each file is written under a temporary name beside
 its target and then hard-linked to the target name, which fails if the target exists: nothing is ever
 overwritten.
+
+`seeded` marks a function that builds a Case from a seed: it runs with one BLAS thread, because the
+generator's eigen-solutions and products round differently with two threads than with one, so a seed
+would otherwise give other digits (and, near a threshold, another verdict) on a machine with another
+core count or in a Dask worker.
 """
 
 from __future__ import annotations
@@ -14,8 +19,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 KINDS = ("time", "base_acceleration", "force", "voltage", "acceleration", "velocity", "displacement")
+
+
+def seeded(build):
+    """build, run with one BLAS thread (see the module docstring)."""
+    return threadpool_limits.wrap(limits=1, user_api="blas")(build)
 
 
 @dataclass

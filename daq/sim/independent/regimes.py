@@ -32,7 +32,7 @@ from .excitation import Hammer, Hit, Programme, Segment
 from .experiment import Drive, Run, Setup, run
 from .integrate import Output, State
 from .modal import ModalModel, reduce
-from .recording import Case
+from .recording import Case, seeded
 from .rig import Rig, build_rig
 from .sensors import UNITS, Sampler, digitise
 
@@ -351,6 +351,7 @@ def _advance(piece: Piece) -> tuple[State, tuple[float, float, float], np.ndarra
     return r.response.final, (last.frequency_hz, last.amplitude, phase), _run_contact(r)
 
 
+@seeded
 def regime_case(seed: int, fs_hz: int | None = None, segment_s: tuple[float, float] = (10.0, 30.0),
                 max_settings: int = 5) -> Case:
     """A programme through all four regimes (in a random order, then one more random regime).
@@ -387,6 +388,7 @@ def regime_case(seed: int, fs_hz: int | None = None, segment_s: tuple[float, flo
     return case
 
 
+@seeded
 def steady_case(seed: int, regime: str, minutes: float = 10.0, fs_hz: int = 1000, chunk_s: float = 30.0,
                 max_settings: int = 5) -> Case:
     """minutes of one steady regime (for false-alarm tests).
