@@ -1,5 +1,7 @@
 """The parts of ident.discovery against analytic or independently computed values."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -9,13 +11,14 @@ from scipy.stats import ttest_rel
 from daq.sim.excitation import Excitation
 from daq.sim.rig import RigConfig, simulate_rig
 from ident.discovery import Channel, Measurement
-from ident.cli.bench_discovery import independent_case
+from daq.sim.independent import discovery_case
+from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.baselines.modal import ModalBaseline, drivable, fit_model, underlying_poles
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, force_series, law_parameters
 from ident.discovery.baselines import Location
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
-from ident.discovery.search import paired_p, predict
+from ident.discovery.search import Candidate, paired_p, predict
 from ident.discovery.signals import convert, frf, impulsive, miso_frf, prepare
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
@@ -396,3 +399,19 @@ def test_no_underlying_frf_is_estimated_from_a_record_of_hammer_hits():
     assert prep.transient and not impulsive(prep.u[rows])
     z = prep.zva[0][:, 0]
     assert underlying_poles(prep, rows, [z**3], 1) is None
+
+
+def test_a_chain_elements_coefficient_is_judged_against_the_element_not_a_one_mass_equivalent():
+    # independent seed 14: a hardening cubic spring between masses 2 and 3 of a force-driven chain. The
+    # generator's one-mode "equivalent" is taken at mass 2 alone (1/511 of the element's k3), while a
+    # finding at a2-a3 acts on their measured difference: the bench compares the finding's coefficient in
+    # N/m^3 with the element's own, and a finding 5 % above it has a 5 % error whatever its per-mass value
+    generated = discovery_case(14)
+    c = independent_case(14, generated)
+    k3 = generated.truth["effect"]["k3_n_per_m3"]
+    assert c.location == "a2-a3" and c.truth == {"coefficient_n_per_m3": k3}
+    per_mass = generated.truth["equivalent"]["k3_per_mass"]
+    found = Candidate("cubic_stiffness", "a2-a3", {"coefficient_per_mass": 511 * per_mass},
+                      physical={"coefficient_n_per_m3": 1.05 * k3, "modal_mass_kg": 2.6}, gain=0.8)
+    v = judge(c, SimpleNamespace(findings=[found], ambiguous=[[]]), 1.0)
+    assert v.right and v.extra == 0 and v.parameter_error == pytest.approx(0.05)

@@ -31,14 +31,24 @@ from ..rig import RigParams
 from .engine import ordered, session
 
 SYNONYMS = {"friction_joint": "hysteretic_joint", "geometric_hardening": "cubic_stiffness"}
-# the truth's parameter and the finding's (both per unit modal mass at the location, or a gap)
-COMPARED = {"contact": ("gap", "gap"), "cubic_stiffness": ("coefficient_per_mass", "coefficient_per_mass"),
-            "quadratic_stiffness": ("coefficient_per_mass", "coefficient_per_mass"),
-            "coulomb_friction": ("force_per_mass", "force_per_mass"),
-            "quadratic_damping": ("coefficient_per_mass", "coefficient_per_mass"),
-            "linear_mismatch": ("stiffness_per_mass", "stiffness_per_mass"),
-            "sensor_gain": ("gain_error", "gain_error"), "clipping": ("range_m_per_s2", "range"),
-            "hysteretic_joint": ("stiffness_per_mass", "stiffness_per_mass")}
+# per cause, (the truth's parameter, the finding's) in order of preference; the first pair both carry is
+# compared. Per unit modal mass at the location, or a gap, or (for an element between two measured masses
+# of a force-driven structure, whose law acts on their measured relative motion) the element's own
+# physical value against the finding's "physical" one in newtons
+COMPARED = {"contact": (("gap", "gap"),),
+            "cubic_stiffness": (("coefficient_n_per_m3", "coefficient_n_per_m3"),
+                                ("coefficient_per_mass", "coefficient_per_mass")),
+            "quadratic_stiffness": (("coefficient_per_mass", "coefficient_per_mass"),),
+            "coulomb_friction": (("force_n", "force_n"), ("force_per_mass", "force_per_mass")),
+            "quadratic_damping": (("coefficient_n_s2_per_m2", "coefficient_n_s2_per_m2"),
+                                  ("coefficient_per_mass", "coefficient_per_mass")),
+            "linear_mismatch": (("stiffness_per_mass", "stiffness_per_mass"),),
+            "sensor_gain": (("gain_error", "gain_error"),), "clipping": (("range_m_per_s2", "range"),),
+            "hysteretic_joint": (("stiffness_per_mass", "stiffness_per_mass"),)}
+# the generator's physical parameter of an element between two masses, by cause, in COMPARED's names
+ELEMENT = {"contact": {"gap": "gap_m"}, "cubic_stiffness": {"coefficient_n_per_m3": "k3_n_per_m3"},
+           "coulomb_friction": {"force_n": "slip_force_n"},
+           "quadratic_damping": {"coefficient_n_s2_per_m2": "coefficient_n_s2_per_m2"}}
 
 
 @dataclass
@@ -99,9 +109,11 @@ def judge(case: Case, d, seconds: float) -> Verdict:
                                                         for f in findings))
     perr = gain = None
     if right and cause in COMPARED:
-        tkey, fkey = COMPARED[cause]
-        if tkey in case.truth and fkey in findings[0].parameters and case.truth[tkey]:
-            perr = abs(findings[0].parameters[fkey] / case.truth[tkey] - 1)
+        found = findings[0].physical | findings[0].parameters
+        pairs = [(t, f) for t, f in COMPARED[cause] if case.truth.get(t) and f in found]
+        if pairs:
+            tkey, fkey = pairs[0]
+            perr = abs(found[fkey] / case.truth[tkey] - 1)
         gain = findings[0].gain
     return Verdict(case.seed, case.family, cause, named, loc, right, extra, perr, gain, seconds, case.info,
                    [f"{f.label} gain {f.gain:.2f}" for f in findings])
@@ -141,6 +153,11 @@ def independent_case(seed: int, generated=None) -> Case:
         truth = {"coefficient_per_mass": eq.get("coefficient_per_mass")}
     elif cause == "hysteretic_joint" and "joint_stiffness_per_mass" in eq:
         truth = {"stiffness_per_mass": eq["joint_stiffness_per_mass"] - eq.get("slipping_stiffness_per_mass", 0.0)}
+    if "-" in (t.get("location") or "") and kind == "force":
+        # the generator's one-mode equivalent of a chain's element is taken at one mass of the pair, not
+        # at their difference (seed 14: 1/511 of the cubic it put there); the element's own value is the
+        # reference
+        truth = {ours: t["effect"][theirs] for ours, theirs in ELEMENT.get(cause, {}).items()}
     info = (f"{c.fs_hz:.0f} Hz, strength {t.get('effect_strength', 0):.2f}, "
             f"{len(t.get('unmeasured_blows') or [])} blows, signs {''.join('+' if v > 0 else '-' for v in t['signs'].values())}")
     return Case(seed, c.family, m, None, cause, t.get("location") or "", truth, info)
