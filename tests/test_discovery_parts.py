@@ -13,6 +13,7 @@ from daq.sim.rig import RigConfig, simulate_rig
 from ident.discovery import Channel, Measurement
 from daq.sim.independent import discovery_case
 from ident.cli.bench_discovery import independent_case, judge
+from ident.discovery.backbone import free_decay
 from ident.discovery.baselines.modal import ModalBaseline, drivable, fit_model, underlying_poles
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, force_series, law_parameters
@@ -415,3 +416,41 @@ def test_a_chain_elements_coefficient_is_judged_against_the_element_not_a_one_ma
                       physical={"coefficient_n_per_m3": 1.05 * k3, "modal_mass_kg": 2.6}, gain=0.8)
     v = judge(c, SimpleNamespace(findings=[found], ambiguous=[[]]), 1.0)
     assert v.right and v.extra == 0 and v.parameter_error == pytest.approx(0.05)
+
+
+def _free_decay(law, fs=5000.0, f0=50.0, zeta=0.004, v0=0.3, duration_s=3.0, hit_s=0.1):
+    """A one-mode free decay after a hit at hit_s (scipy's DOP853), and the hit as the excitation."""
+    w0 = 2 * np.pi * f0
+    t = np.arange(int(duration_s * fs)) / fs
+    k = int(hit_s * fs)
+    sol = solve_ivp(lambda _, s: [s[1], -2 * zeta * w0 * s[1] - w0**2 * s[0] - law(s[0])], (t[k], t[-1]), [0.0, v0],
+                    t_eval=t[k:], rtol=1e-10, atol=1e-13, method="DOP853")
+    y, u = np.zeros(t.size), np.zeros(t.size)
+    y[k:], u[k] = sol.y[0], 1.0
+    return y, u, fs, w0
+
+
+@pytest.mark.parametrize("power", [2.0, 1.0])
+def test_a_free_decays_backbone_has_the_first_order_shape_and_shift_of_its_law(power):
+    # first-order harmonic balance: k3 z^3 shifts w0 by 3/8 k3 A^2 / w0^2, k2 z|z| by 4/(3 pi) k2 A / w0^2;
+    # both laws set to shift a 50 Hz mode by 6 % at the hit's amplitude
+    a0, w0 = 0.3 / (2 * np.pi * 50), 2 * np.pi * 50
+    if power == 2.0:
+        k = 0.06 * 8 / 3 * w0**2 / a0**2
+        law, shift = (lambda z: k * z**3), (lambda a: 3 / 8 * k * a**2 / w0**2)
+    else:
+        k = 0.06 * 3 * np.pi / 4 * w0**2 / a0
+        law, shift = (lambda z: k * z * abs(z)), (lambda a: 4 / (3 * np.pi) * k * a / w0**2)
+    y, u, fs, _ = _free_decay(law)
+    bb = free_decay("x", y, u, fs, 50.0)
+    assert bb.follows({1.0, 2.0}) == power
+    f0, df, _ = bb.line(power)
+    assert f0 == pytest.approx(50.0, abs=0.05)
+    assert df == pytest.approx(50.0 * shift(bb.amplitude.max()), rel=0.05)
+
+
+def test_a_linear_decays_backbone_separates_nothing():
+    # no shift beyond 0.1 % of the frequency (the laws above shift it by 6 %)
+    y, u, fs, _ = _free_decay(lambda z: 0.0)
+    bb = free_decay("x", y, u, fs, 50.0)
+    assert bb.follows({1.0, 2.0}) is None and abs(bb.line(2.0)[1]) < 0.05

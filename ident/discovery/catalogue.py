@@ -67,6 +67,7 @@ class Cause:
     positive: bool = True
     kind: str = "mechanical"  # or "sensor"
     separates_by: str = ""  # the test that would tell this cause from a look-alike
+    backbone_power: float | None = None  # a free decay's frequency shift grows with amplitude**power
 
     @property
     def order(self) -> int:
@@ -80,10 +81,10 @@ CAUSES: dict[str, Cause] = {c.name: c for c in (
            Parameter("side", "", "both, positive or negative")),
           separates_by="a stepped sine whose levels straddle the gap: a contact switches on at one amplitude"),
     Cause("cubic_stiffness", CUBIC, (Parameter("coefficient_per_mass", "1/(m^2 s^2)", "k3 per modal mass"),),
-          positive=False,
+          positive=False, backbone_power=2.0,
           separates_by="a stepped sine at three or more levels: a cubic's frequency shift grows with amplitude^2"),
     Cause("quadratic_stiffness", QUADRATIC, (Parameter("coefficient_per_mass", "1/(m s^2)", "k2 per modal mass"),),
-          positive=False,
+          positive=False, backbone_power=1.0,
           separates_by="a stepped sine at three or more levels: the shift grows with amplitude, not its square"),
     Cause("coulomb_friction", COULOMB, (Parameter("force_per_mass", "m/s^2", "friction force per modal mass"),),
           separates_by="a low level: dry friction damps small motion most (equivalent damping ~ 1/amplitude)"),
