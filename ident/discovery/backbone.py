@@ -12,8 +12,8 @@ So where the held-out error cannot tell a cubic from a quadratic stiffness (both
 frequency; the paired test over a few blocks has no power to separate them), the decay's own backbone
 can. ``free_decay`` measures it: the response band-passed around the mode (0.6-1.6 of its frequency),
 its analytic signal's phase rate and modulus, averaged over ten periods, from 20 ms after each hit
-until the amplitude falls to a tenth of its start; ``Backbone.rms(p)`` is the error of the best line
-of frequency against amplitude^p.
+until the amplitude falls to a tenth of its start; ``Backbone.line(p)`` gives the best line
+of frequency against amplitude^p and its RMS error.
 """
 
 from __future__ import annotations
