@@ -93,7 +93,7 @@ def _crc_table16() -> np.ndarray:
 
 
 CRC_TABLE16 = _crc_table16()
-FEW_ROWS = 16  # below this many rows crc16_rows calls binascii.crc_hqx (the same CRC: poly 0x1021, no reflection)
+FEW_ROWS = 16  # up to this many rows crc16_rows calls binascii.crc_hqx (the same CRC: poly 0x1021, no reflection)
 
 
 def crc16_rows(rows: np.ndarray, init: np.ndarray | None = None) -> np.ndarray:

@@ -427,7 +427,7 @@ def _free_decay(law, fs=5000.0, f0=50.0, zeta=0.004, v0=0.3, duration_s=3.0, hit
                     t_eval=t[k:], rtol=1e-10, atol=1e-13, method="DOP853")
     y, u = np.zeros(t.size), np.zeros(t.size)
     y[k:], u[k] = sol.y[0], 1.0
-    return y, u, fs, w0
+    return y, u, fs
 
 
 @pytest.mark.parametrize("power", [2.0, 1.0])
@@ -441,7 +441,7 @@ def test_a_free_decays_backbone_has_the_first_order_shape_and_shift_of_its_law(p
     else:
         k = 0.06 * 3 * np.pi / 4 * w0**2 / a0
         law, shift = (lambda z: k * z * abs(z)), (lambda a: 4 / (3 * np.pi) * k * a / w0**2)
-    y, u, fs, _ = _free_decay(law)
+    y, u, fs = _free_decay(law)
     bb = free_decay("x", y, u, fs, 50.0)
     assert bb.follows({1.0, 2.0}) == power
     f0, df, _ = bb.line(power)
@@ -451,6 +451,6 @@ def test_a_free_decays_backbone_has_the_first_order_shape_and_shift_of_its_law(p
 
 def test_a_linear_decays_backbone_separates_nothing():
     # no shift beyond 0.1 % of the frequency (the laws above shift it by 6 %)
-    y, u, fs, _ = _free_decay(lambda z: 0.0)
+    y, u, fs = _free_decay(lambda z: 0.0)
     bb = free_decay("x", y, u, fs, 50.0)
     assert bb.follows({1.0, 2.0}) is None and abs(bb.line(2.0)[1]) < 0.05

@@ -221,8 +221,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     if fit_data is not None:
         scored = _hold_at_fit_level(scored, baseline, prep_fit, warm, f_min, settings)
 
-    sel = _select(scored, baseline, prep, split, sc, settings)
-    sel = _settle_by_backbone(sel, prep, char)
+    sel = _select(scored, baseline, prep, split, sc, settings, char)
     ext_model, ext_out, ext_err, ext_blocks = baseline.model, (), n0, e0
     if sel.findings:
         own = sel.findings[0].baseline or baseline
@@ -239,43 +238,43 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
                      split, prep, warm, [t / prep.fs_hz for t in onsets], resid_rms, char, notes)
 
 
-def _settle_by_backbone(sel: Selection, prep: Prepared, char: dict) -> Selection:
+def _settle_by_backbone(first: Candidate, alike: list[Candidate], prep: Prepared,
+                        char: dict) -> tuple[Candidate, list[Candidate], str]:
     """A hammer-hit record rings down through every amplitude: where the first finding's look-alikes
     include a cause whose backbone has another shape (a cubic's shift grows with amplitude^2, a quadratic
     stiffness's with amplitude), the decay's measured backbone at the finding's response settles it
-    (``backbone``); the backbone goes into the characterisation and the reason into the notes."""
-    if not (prep.transient and sel.findings and sel.ambiguous[0]) or sel.findings[0].location not in prep.names:
-        return sel
-    first, alike = sel.findings[0], sel.ambiguous[0]
+    (``backbone``). Returns the first finding, its look-alikes left and the reason ("" if unsettled); the
+    backbone goes into the characterisation."""
+    if not (prep.transient and alike) or first.location not in prep.names:
+        return first, alike, ""
     here = [c for c in [first] + alike if c.location == first.location]
     powers = {CAUSES[c.cause].backbone_power for c in here} - {None}
     if len(powers) < 2:
-        return sel
+        return first, alike, ""
     y = prep.measured[:, prep.names.index(first.location)]
     spectrum = np.abs(np.fft.rfft(y * np.hanning(y.size)))
     f = np.fft.rfftfreq(y.size, 1.0 / prep.fs_hz)
     inband = (f >= prep.band[0]) & (f <= prep.band[1])
     if not inband.any():
-        return sel
+        return first, alike, ""
     bb = free_decay(first.location, y, prep.u, prep.fs_hz, float(f[inband][np.argmax(spectrum[inband])]))
     if bb is None:
-        return sel
+        return first, alike, ""
     char.setdefault(first.location, {})["backbone"] = bb.as_json()
     power = bb.follows(powers)
     if power is None:
-        return sel
+        return first, alike, ""
+    # the power the decay follows is some candidate's here, so at least one candidate stays
     out = {c.label for c in here if CAUSES[c.cause].backbone_power not in (None, power)}
     keep = [c for c in [first] + alike if c.label not in out]
-    if not out or not keep:
-        return sel
-    first = first if first.label not in out else max(keep, key=lambda c: c.gain)
+    if first.label in out:
+        first = max(keep, key=lambda c: c.gain)
     errs = {p: bb.line(p)[2] for p in powers}
     other = min(errs[p] for p in powers if p != power)
     reason = (f"the free decays' backbone at {first.location} ({bb.mode_hz:.1f} Hz): its frequency shift grows "
               f"with amplitude^{power:g} (a line {errs[power]:.2g} Hz off, against {other:.2g} Hz for the other "
               f"power): {', '.join(sorted(out))} set aside")
-    return Selection([first] + sel.findings[1:], [[c for c in keep if c is not first]] + sel.ambiguous[1:],
-                     sel.reasons + [reason])
+    return first, [c for c in keep if c is not first], reason
 
 
 def _leaders(cands: list[Candidate], baseline: Baseline, by_loc: dict, prep: Prepared, split: Split, warm: int,
@@ -343,10 +342,13 @@ def _hold_at_fit_level(cands: list[Candidate], baseline: Baseline, prep_fit: Pre
 
 
 def _select(scored: list[Candidate], baseline: Baseline, prep: Prepared, split: Split, sc: Scoring,
-            settings: Settings) -> Selection:
+            settings: Settings, char: dict) -> Selection:
     first, alike, why = choose(scored, settings)
     if first is None:
         return Selection([], [], [why])
+    # the record's own backbone may settle look-alikes before a second finding is sought on top of the first
+    first, alike, settled = _settle_by_backbone(first, alike, prep, char)
+    reasons = [settled] if settled else []
     findings, ambiguous = [first], [alike]
     # a second finding: another cause at another location adding a significant gain on top of the first
     own = first.baseline or baseline
@@ -365,4 +367,4 @@ def _select(scored: list[Candidate], baseline: Baseline, prep: Prepared, split: 
     if best2 is not None:
         findings.append(best2[1])
         ambiguous.append([])
-    return Selection(findings, ambiguous, [])
+    return Selection(findings, ambiguous, reasons)
