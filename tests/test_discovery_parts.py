@@ -454,3 +454,24 @@ def test_a_linear_decays_backbone_separates_nothing():
     y, u, fs = _free_decay(lambda z: 0.0)
     bb = free_decay("x", y, u, fs, 50.0)
     assert bb.follows({1.0, 2.0}) is None and abs(bb.line(2.0)[1]) < 0.05
+
+
+def test_a_joints_truth_is_the_stiffness_it_loses_when_every_element_slips():
+    # a root joint of two Jenkins elements (2 N m/rad each, slip moments 1 and 4 mN m) on a mode whose
+    # root rotation is 0.5 rad per metre of tip motion and whose mass at the tip is 0.04 kg: slipped, it
+    # loses 4 N m/rad, 4 x 0.5^2 = 1 N/m at the tip, 25 /s^2 per kg; the last element slips at a rotation
+    # of 2 mrad, 4 mm at the tip. The residual stiffness (joint minus elements: 6 N m/rad) is not it
+    from daq.sim.independent.draws import equivalents
+    params = {"joint_stiffness": 10.0, "jenkins_stiffness": [2.0, 2.0], "jenkins_slip": [1e-3, 4e-3]}
+    effect = {"joint_stiffness_n_m_per_rad": 10.0, "jenkins_stiffness_n_m_per_rad": [2.0, 2.0],
+              "jenkins_slip_moment_n_m": [1e-3, 4e-3]}
+    eq = equivalents(5.0, 2.5, 2 * np.pi * 12, 0.02, "friction_joint", params)
+    n = 4000
+    generated = SimpleNamespace(fs_hz=1000.0, family="rig_base", columns={k: np.random.default_rng(i).normal(size=n)
+                                                                     for i, k in enumerate(("base", "tip1"))},
+                                truth={"excitation": "base:base_acceleration", "responses": ["tip1:acceleration"],
+                                       "equivalent": eq, "effect": effect, "cause": "friction_joint",
+                                       "location": "tip1", "signs": {"tip1": 1}})
+    c = independent_case(0, generated)
+    assert c.truth["stiffness_per_mass"] == pytest.approx(25.0)
+    assert c.truth["slip"] == pytest.approx(4e-3)

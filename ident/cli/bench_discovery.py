@@ -132,6 +132,21 @@ def run_case(args: tuple[str, int, float]) -> Verdict:
     return judge(case, d, time.perf_counter() - t0)
 
 
+def _joint_truth(eq: dict, effect: dict) -> dict:
+    """A friction joint in this catalogue's terms: the stiffness it loses once every Jenkins element slips
+    (their sum, per modal mass at the sensor; not the residual stiffness that stays) and the displacement
+    at the sensor at which the last one slips (an element's slip force over its stiffness; a root joint's
+    rotation over the mode's rotation per tip displacement)."""
+    truth = {"stiffness_per_mass": eq["slipping_stiffness_per_mass"]}
+    k = next((v for key, v in effect.items() if key.startswith("jenkins_stiffness")), None)
+    limit = next((v for key, v in effect.items() if key.startswith("jenkins_slip")), None)
+    if k and limit:
+        rotation = any(key.startswith("jenkins_slip_moment") for key in effect)
+        per = abs(float(eq.get("mode_ratio", 1.0))) if rotation else 1.0
+        truth["slip"] = float(np.max(np.asarray(limit, float) / np.asarray(k, float))) / per
+    return truth
+
+
 def independent_case(seed: int, generated=None) -> Case:
     """The generator's case ``seed`` as a measurement and its truth (``generated``: that case, if already
     drawn)."""
@@ -151,8 +166,8 @@ def independent_case(seed: int, generated=None) -> Case:
         truth = {"force_per_mass": eq.get("slip_force_per_mass")}
     elif cause == "quadratic_damping":
         truth = {"coefficient_per_mass": eq.get("coefficient_per_mass")}
-    elif cause == "hysteretic_joint" and "joint_stiffness_per_mass" in eq:
-        truth = {"stiffness_per_mass": eq["joint_stiffness_per_mass"] - eq.get("slipping_stiffness_per_mass", 0.0)}
+    elif cause == "hysteretic_joint" and "slipping_stiffness_per_mass" in eq:
+        truth = _joint_truth(eq, t.get("effect", {}))
     if "-" in (t.get("location") or "") and kind == "force":
         # the generator's one-mode equivalent of a chain's element is taken at one mass of the pair, not
         # at their difference (seed 14: 1/511 of the cubic it put there); the element's own value is the
