@@ -146,7 +146,9 @@ def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(
         y = full.copy()
         y[moves] = x
         m = y.size // 2
-        return -np.exp(y[:m]) + 1j * np.exp(y[m:])
+        out = poles.copy()
+        out[free] = (-np.exp(y[:m]) + 1j * np.exp(y[m:]))[free]
+        return out
 
     def resid(x):
         if not admissible(unpack(x), prep):
