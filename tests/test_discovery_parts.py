@@ -19,7 +19,7 @@ from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, force_series, law_parameters
 from ident.discovery.baselines import Location
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
-from ident.discovery.search import Candidate, paired_p, predict
+from ident.discovery.search import Candidate, one_sign, paired_p, predict
 from ident.discovery.signals import convert, frf, impulsive, miso_frf, prepare
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
@@ -496,3 +496,27 @@ def test_a_refit_moves_only_the_modes_an_element_can_drive():
     assert refit.model.poles[1] == off[1]
     assert np.allclose(refit.model.poles[[0, 2]], truth[[0, 2]], rtol=2e-3)
 
+
+def test_a_regression_acts_in_every_mode_with_one_sign():
+    # two modes' columns and data made by +1 in the first and -0.5 in the second: no force at one place
+    # does that when both modes have a positive mass (signs +1, +1), and the fit becomes the better of the
+    # two one-mode fits with a coefficient of the allowed sign, computed here by hand; where the second
+    # mode's mass sign is -1 the same coefficients agree and come back unchanged
+    rng = np.random.default_rng(5)
+    X = rng.standard_normal((400, 2))
+    X[:, 1] += 0.6 * X[:, 0]
+    y = X @ np.array([1.0, -0.5]) + 0.01 * rng.standard_normal(400)
+    theta = np.linalg.lstsq(X, y, rcond=None)[0]
+    assert theta[0] > 0 > theta[1]
+    by_hand = []
+    for j in (0, 1):
+        c = max(0.0, float(X[:, j] @ y / (X[:, j] @ X[:, j])))
+        th = np.zeros(2)
+        th[j] = c
+        by_hand.append((float(np.sum((y - X @ th) ** 2)), j, th))
+    want = min(by_hand, key=lambda t: t[0])[2]
+    assert np.allclose(one_sign(X, y, theta, np.array([1.0, 1.0]), positive=True), want, rtol=1e-9)
+    assert np.array_equal(one_sign(X, y, theta, np.array([1.0, -1.0]), positive=True), theta)
+    # a law free in sign (a cubic that softens) may have every mode negative, not a mix
+    got = one_sign(X, -y, -theta, np.array([1.0, 1.0]), positive=False)
+    assert np.all(got <= 0) and np.allclose(got, -want, rtol=1e-9)

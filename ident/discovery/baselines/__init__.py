@@ -101,6 +101,11 @@ class Baseline:
         """The coordinate's modal mass [kg] when the model has physical units, else None."""
         return None
 
+    def basis_signs(self, loc: Location, gains: list[np.ndarray]) -> np.ndarray | None:
+        """Per gain of ``gain_basis``, the sign its coefficient takes when a force at the location acts
+        on that mode with a positive modal mass (None: the basis has one gain, nothing to agree)."""
+        return None
+
     def initial_state(self, prep: Prepared, model: LinearModel, start: int, stop: int) -> np.ndarray:
         raise NotImplementedError
 

@@ -453,6 +453,14 @@ class ModalBaseline(Baseline):
         # gain_r = x kappa_r theta  ->  per mass = theta kappa_r x^2 = gain_r x
         return float(np.real(gain[r] * x))
 
+    def basis_signs(self, loc: Location, gains: list[np.ndarray]) -> np.ndarray | None:
+        """A force at one place enters every mode through that mode's mass, which is positive: per mode the
+        sign of ``per_mass`` for a unit coefficient on its gain (each gain of the basis is one mode's)."""
+        if len(gains) < 2:
+            return None
+        x = self.coordinate_modes(loc) * self._omega2i()
+        return np.array([np.sign(float(np.real(np.sum(g * x)))) for g in gains])
+
     def physical(self, loc: Location) -> float | None:
         if self.driving_point is None:
             return None
