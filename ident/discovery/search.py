@@ -260,6 +260,8 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
                 theta = one_sign(X, target, theta, signs, cause.positive)
         except np.linalg.LinAlgError:
             continue
+        if not np.any(theta):  # no fit of one sign: no candidate (seed 85 had listed a cubic of 0)
+            continue
         r2 = 1.0 - float(np.sum((target - X @ theta) ** 2)) / tt
         elements = []
         for c in range(cols.shape[1]):
