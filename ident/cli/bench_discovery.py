@@ -135,14 +135,14 @@ def run_case(args: tuple[str, int, float]) -> Verdict:
 def _joint_truth(eq: dict, effect: dict) -> dict:
     """A friction joint in this catalogue's terms: the stiffness it loses once every Jenkins element slips
     (their sum, per modal mass at the sensor; not the residual stiffness that stays) and the displacement
-    at the sensor at which the last one slips (an element's slip force over its stiffness; a root joint's
-    rotation over the mode's rotation per tip displacement)."""
+    at the sensor at which the last one slips (an element's slip force over its stiffness, at the joint,
+    over the mode's motion at the joint per unit motion at the sensor: for a root joint, its rotation per
+    metre of tip displacement)."""
     truth = {"stiffness_per_mass": eq["slipping_stiffness_per_mass"]}
     k = next((v for key, v in effect.items() if key.startswith("jenkins_stiffness")), None)
     limit = next((v for key, v in effect.items() if key.startswith("jenkins_slip")), None)
     if k and limit:
-        rotation = any(key.startswith("jenkins_slip_moment") for key in effect)
-        per = abs(float(eq.get("mode_ratio", 1.0))) if rotation else 1.0
+        per = abs(float(eq.get("mode_ratio", 1.0)))
         truth["slip"] = float(np.max(np.asarray(limit, float) / np.asarray(k, float))) / per
     return truth
 

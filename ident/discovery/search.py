@@ -260,8 +260,6 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
                 theta = one_sign(X, target, theta, signs, cause.positive)
         except np.linalg.LinAlgError:
             continue
-        if not np.any(theta):  # no fit of one sign: no candidate (seed 85 had listed a cubic of 0)
-            continue
         r2 = 1.0 - float(np.sum((target - X @ theta) ** 2)) / tt
         elements = []
         for c in range(cols.shape[1]):
@@ -302,8 +300,8 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
 def one_sign(X: np.ndarray, y: np.ndarray, theta: np.ndarray, signs: np.ndarray, positive: bool) -> np.ndarray:
     """Least squares with the force acting in every mode with one sign (``signs``: per column, the sign
     of a positive modal mass; ``positive``: that sign only, else either): the unconstrained ``theta`` if
-    it agrees, else the best fit over the subsets of columns left free whose solution agrees (at most
-    2^3 - 1 small systems). Fitted per mode without it, a regression could soften one mode and stiffen
+    it agrees, else the best fit over the subsets of columns left free whose solution agrees (2^n - 2
+    small systems, n at most 3). Fitted per mode without it, a regression could soften one mode and stiffen
     the next with one spring (independent seed 45: a contact at -258 /s^2 in the beam's mode, +0.5 in
     the other), which no force at one place does, and which, scaled, drove the simulation unstable."""
     def agrees(th):
@@ -457,7 +455,8 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
     to a separate record (``fit``: its preparation and segments, a low level) is refitted there with the
     candidate in place, before and after the refinement (the cause acts at the low level too: the linear
     part fitted there without it holds the cause's equivalent stiffness and damping twice); then its
-    coefficients are scaled (log, within a factor e^2, e^5 for a stopper's or a joint's stiffness); a
+    coefficients are scaled (log, within a factor e^2, e^5 for a joint's stiffness and at least that for a
+    stopper's, whose scan reaches 100 times the fastest mode's stiffness); a
     contact's side, gap and stiffness are scanned first (a stiff stopper's error is a narrow valley in
     the gap), a joint's slip displacement is scaled too."""
     if not c.elements:
@@ -493,7 +492,7 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
         gap0 = float(shape0["gap"])
         w2 = float(np.max(np.abs(baseline.model.poles)) ** 2)
         k0 = max(c.parameters["stiffness_per_mass"], 1e-300)
-        levels = sorted({0.0} | {float(np.log(f * w2 / k0)) for f in (10.0, 100.0)})
+        levels = sorted({0.0} | {max(float(np.log(f * w2 / k0)), -reach) for f in (10.0, 100.0)})
         # the stiff levels are absolute (10 and 100 times the fastest mode's stiffness per mass), not a
         # factor of the regression's value: a regression a thousand times too soft had kept the scan and
         # the simplex below e^5 of it (independent seed 67: 1.7e4 /s^2 where the stopper has 2.4e5)

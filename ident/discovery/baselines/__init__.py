@@ -103,7 +103,8 @@ class Baseline:
 
     def basis_signs(self, loc: Location, gains: list[np.ndarray]) -> np.ndarray | None:
         """Per gain of ``gain_basis``, the sign its coefficient takes when a force at the location acts
-        on that mode with a positive modal mass (None: the basis has one gain, nothing to agree)."""
+        on that gain's mode with a positive modal mass; None where the coefficients need not agree (a
+        basis of one gain, or a baseline whose gains are physical already)."""
         return None
 
     def initial_state(self, prep: Prepared, model: LinearModel, start: int, stop: int) -> np.ndarray:

@@ -454,8 +454,9 @@ class ModalBaseline(Baseline):
         return float(np.real(gain[r] * x))
 
     def basis_signs(self, loc: Location, gains: list[np.ndarray]) -> np.ndarray | None:
-        """A force at one place enters every mode through that mode's mass, which is positive: per mode the
-        sign of ``per_mass`` for a unit coefficient on its gain (each gain of the basis is one mode's)."""
+        """A force at one place enters every mode through that mode's mass, which is positive: per gain
+        of the basis (each is one mode's) the sign of what ``per_mass`` reads for a unit coefficient,
+        read in that gain's own mode rather than the location's dominant one."""
         if len(gains) < 2:
             return None
         x = self.coordinate_modes(loc) * self._omega2i()
