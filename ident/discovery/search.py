@@ -303,7 +303,7 @@ def one_sign(X: np.ndarray, y: np.ndarray, theta: np.ndarray, signs: np.ndarray,
     it agrees, else the best fit over the subsets of columns left free whose solution agrees (2^n - 2
     small systems, n at most 3). Fitted per mode without it, a regression could soften one mode and stiffen
     the next with one spring (independent seed 45: a contact at -258 /s^2 in the beam's mode, +0.5 in
-    the other), which no force at one place does, and which, scaled, drove the simulation unstable."""
+    the other), which no force at one place does."""
     def agrees(th):
         s = th * signs
         return bool(np.all(s >= 0) or (not positive and np.all(s <= 0)))
