@@ -12,6 +12,7 @@ from daq.sim.excitation import Excitation
 from daq.sim.rig import RigConfig, simulate_rig
 from ident.discovery import Channel, Measurement
 from daq.sim.independent import discovery_case
+from daq.sim.independent.draws import equivalents
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import free_decay
 from ident.discovery.baselines.modal import ModalBaseline, drivable, fit_model, underlying_poles
@@ -461,7 +462,6 @@ def test_a_joints_truth_is_the_stiffness_it_loses_when_every_element_slips():
     # root rotation is 0.5 rad per metre of tip motion and whose mass at the tip is 0.04 kg: slipped, it
     # loses 4 N m/rad, 4 x 0.5^2 = 1 N/m at the tip, 25 /s^2 per kg; the last element slips at a rotation
     # of 2 mrad, 4 mm at the tip. The residual stiffness (joint minus elements: 6 N m/rad) is not it
-    from daq.sim.independent.draws import equivalents
     params = {"joint_stiffness": 10.0, "jenkins_stiffness": [2.0, 2.0], "jenkins_slip": [1e-3, 4e-3]}
     effect = {"joint_stiffness_n_m_per_rad": 10.0, "jenkins_stiffness_n_m_per_rad": [2.0, 2.0],
               "jenkins_slip_moment_n_m": [1e-3, 4e-3]}
