@@ -498,31 +498,39 @@ def test_a_refit_moves_only_the_modes_an_element_can_drive():
 
 
 def test_a_regression_acts_in_every_mode_with_one_sign():
-    # two modes' columns and data made by +1 in the first and -0.5 in the second: no force at one place
-    # does that when both modes have a positive mass (signs +1, +1), and the fit becomes the better of the
-    # two one-mode fits with a coefficient of the allowed sign, computed here by hand; where the second
-    # mode's mass sign is -1 the same coefficients agree and come back unchanged
+    # three modes' columns, the first the location's dominant mode (where a candidate's coefficient is
+    # read), and data made by +1, -0.5 and +0.3: no force at one place does that when every mode has a
+    # positive mass (signs +1, +1, +1). The fit becomes the best of the fits on the first column alone or
+    # with one other whose coefficients are all of the allowed sign, each computed here by hand; where
+    # the second mode's mass sign is -1 the same coefficients agree and come back unchanged
     rng = np.random.default_rng(5)
-    X = rng.standard_normal((400, 2))
+    X = rng.standard_normal((400, 3))
     X[:, 1] += 0.6 * X[:, 0]
-    y = X @ np.array([1.0, -0.5]) + 0.01 * rng.standard_normal(400)
+    y = X @ np.array([1.0, -0.5, 0.3]) + 0.01 * rng.standard_normal(400)
     theta = np.linalg.lstsq(X, y, rcond=None)[0]
     assert theta[0] > 0 > theta[1]
-    by_hand = []
-    for j in (0, 1):
-        c = max(0.0, float(X[:, j] @ y / (X[:, j] @ X[:, j])))
-        th = np.zeros(2)
-        th[j] = c
-        by_hand.append((float(np.sum((y - X @ th) ** 2)), j, th))
-    want = min(by_hand, key=lambda t: t[0])[2]
-    assert np.allclose(one_sign(X, y, theta, np.array([1.0, 1.0]), positive=True), want, rtol=1e-9)
-    assert np.array_equal(one_sign(X, y, theta, np.array([1.0, -1.0]), positive=True), theta)
-    # a law free in sign (a cubic that softens) may take either sign in every mode, not a mix: with the
-    # data negated, the best one-mode fit of either sign, by hand
-    free = []
-    for j in (0, 1):
-        th = np.zeros(2)
-        th[j] = float(X[:, j] @ -y / (X[:, j] @ X[:, j]))
-        free.append((float(np.sum((-y - X @ th) ** 2)), j, th))
-    got = one_sign(X, -y, -theta, np.array([1.0, 1.0]), positive=False)
-    assert np.allclose(got, min(free, key=lambda t: t[0])[2], rtol=1e-9)
+
+    def fit(cols, data):
+        th = np.zeros(3)
+        th[list(cols)] = np.linalg.lstsq(X[:, list(cols)], data, rcond=None)[0]
+        return float(np.sum((data - X @ th) ** 2)), th
+
+    by_hand = [fit(c, y) for c in ((0,), (0, 1), (0, 2))]
+    want = min((f for f in by_hand if np.all(f[1] >= 0)), key=lambda f: f[0])[1]
+    assert np.count_nonzero(want) == 2
+    assert np.allclose(one_sign(X, y, theta, np.ones(3), positive=True), want, rtol=1e-9)
+    assert np.array_equal(one_sign(X, y, theta, np.array([1.0, -1.0, 1.0]), positive=True), theta)
+    # a law free in sign (a cubic that softens) may take either sign in every mode, not a mix
+    free = [fit(c, -y) for c in ((0,), (0, 1), (0, 2))]
+    want = min((f for f in free if np.all(f[1] <= 0)), key=lambda f: f[0])[1]
+    assert np.allclose(one_sign(X, -y, -theta, np.ones(3), positive=False), want, rtol=1e-9)
+    # two modes, data made mostly in the weaker one: the second column alone would fit best, but the
+    # first is kept, and where its coefficient takes the sign the law forbids nothing is left
+    X2 = X[:, :2]
+    y2 = X2 @ np.array([0.2, -1.0])
+    th2 = np.linalg.lstsq(X2, y2, rcond=None)[0]
+    alone = [float(X2[:, j] @ y2 / (X2[:, j] @ X2[:, j])) for j in (0, 1)]
+    err = [float(np.sum((y2 - X2[:, j] * alone[j]) ** 2)) for j in (0, 1)]
+    assert err[1] < 0.5 * err[0] and alone[0] < 0
+    assert np.allclose(one_sign(X2, y2, th2, np.ones(2), positive=False), [alone[0], 0.0], rtol=1e-9)
+    assert not np.any(one_sign(X2, y2, th2, np.ones(2), positive=True))

@@ -260,6 +260,8 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
                 theta = one_sign(X, target, theta, signs, cause.positive)
         except np.linalg.LinAlgError:
             continue
+        if not np.any(theta):
+            continue
         r2 = 1.0 - float(np.sum((target - X @ theta) ** 2)) / tt
         elements = []
         for c in range(cols.shape[1]):
@@ -300,10 +302,12 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
 def one_sign(X: np.ndarray, y: np.ndarray, theta: np.ndarray, signs: np.ndarray, positive: bool) -> np.ndarray:
     """Least squares with the force acting in every mode with one sign (``signs``: per column, the sign
     of a positive modal mass; ``positive``: that sign only, else either): the unconstrained ``theta`` if
-    it agrees, else the best fit over the subsets of columns left free whose solution agrees (2^n - 2
-    small systems, n at most 3). Fitted per mode without it, a regression could soften one mode and stiffen
-    the next with one spring (independent seed 45: a contact at -258 /s^2 in the beam's mode, +0.5 in
-    the other), which no force at one place does."""
+    it agrees, else the best fit over the subsets of columns left free whose solution agrees (2^(n-1) - 1
+    small systems, n at most 3), all zero if none does. Fitted per mode without it, a regression could
+    soften one mode and stiffen the next with one spring (independent seed 45: a contact at -258 /s^2 in
+    the beam's mode, +0.5 in the other), which no force at one place does. The first column, the
+    location's dominant mode where a candidate's coefficient is read, is in every subset: without it a
+    candidate would report zero while acting in weaker modes."""
     def agrees(th):
         s = th * signs
         return bool(np.all(s >= 0) or (not positive and np.all(s <= 0)))
@@ -312,7 +316,7 @@ def one_sign(X: np.ndarray, y: np.ndarray, theta: np.ndarray, signs: np.ndarray,
         return theta
     best, best_err = np.zeros_like(theta), float(y @ y)
     n = theta.size
-    for mask in range(1, 2**n - 1):
+    for mask in range(1, 2**n - 1, 2):
         idx = [j for j in range(n) if mask >> j & 1]
         th = np.zeros_like(theta)
         th[idx] = lstsq(X[:, idx], y)
