@@ -299,6 +299,19 @@ def vector_fit_poles(f_hz: np.ndarray, H: np.ndarray, n_modes: int, iterations: 
     return poles[np.argsort(poles.imag)]
 
 
+def peak_poles(f_hz: np.ndarray, H: np.ndarray, n_modes: int, zeta: float = 0.02) -> np.ndarray | None:
+    """Poles at the ``n_modes`` highest peaks of the responses' FRF magnitudes, each response scaled to
+    its own largest (peak picking, so a mode that one sensor alone sees counts as much as one every sensor
+    sees), at damping ratio ``zeta``; None if there are fewer peaks."""
+    a = np.sum((np.abs(H) / (np.abs(H).max(axis=1, keepdims=True) + 1e-300)) ** 2, axis=0)
+    inner = np.flatnonzero((a[1:-1] >= a[:-2]) & (a[1:-1] > a[2:])) + 1
+    if inner.size < n_modes:
+        return None
+    top = np.sort(inner[np.argsort(a[inner])[::-1][:n_modes]])
+    w = 2 * np.pi * f_hz[top]
+    return -zeta * w + 1j * w
+
+
 def _unresolved_pair(poles: np.ndarray, resolution_hz: float) -> bool:
     """Are two of the modes closer in frequency than their half-power bandwidths and the record's
     frequency resolution add up to? One response cannot tell such a pair from one mode whose frequency
@@ -345,12 +358,25 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
     f, H = f[keep], H[:, keep]
     kept, misses = None, 0
     for m in range(1, min(max_modes, keep.sum() // 4) + 1):
-        try:
-            poles = vector_fit_poles(f, H, m)
-            poles = refine_poles(poles, prep, rows, max_nfev=12, stride=2 * st)
-            C, fit = fit_residues(poles, prep, rows, at=check)
-        except NUMERIC_FAILURES:
+        # two starts per order, the better refined one kept: vector fitting's poles, and poles at the
+        # FRF's peaks. On few lines (a stepped sine) vector fitting can put two modes where one is and
+        # miss a mode that one sensor alone sees (independent seed 61: 13.97 and 14.51 Hz where the
+        # beams' modes are near 13.2 and 15.1; the second beam's held-out error went from 1.27 to 2.1)
+        tried = []
+        for start in (vector_fit_poles, peak_poles):
+            try:
+                poles = start(f, H, m)
+                if poles is None:
+                    continue
+                poles = refine_poles(poles, prep, rows, max_nfev=12, stride=2 * st)
+                C, fit = fit_residues(poles, prep, rows, at=check)
+            except NUMERIC_FAILURES:
+                continue
+            tried.append((float(np.sum(_per_response(fit, prep.measured[rows if check is None else check]))),
+                          poles, C, fit))
+        if not tried:
             break
+        _, poles, C, fit = min(tried, key=lambda t: t[0])
         resonant = structural(poles, prep)
         if not np.any(resonant):  # nothing resonates: no order to choose
             continue
