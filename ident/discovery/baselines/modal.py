@@ -372,11 +372,10 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
                 C, fit = fit_residues(poles, prep, rows, at=check)
             except NUMERIC_FAILURES:
                 continue
-            tried.append((float(np.sum(_per_response(fit, prep.measured[rows if check is None else check]))),
-                          poles, C, fit))
+            tried.append((_per_response(fit, prep.measured[rows if check is None else check]), poles, C))
         if not tried:
             break
-        _, poles, C, fit = min(tried, key=lambda t: t[0])
+        each, poles, C = min(tried, key=lambda t: float(np.sum(t[0])))
         resonant = structural(poles, prep)
         if not np.any(resonant):  # nothing resonates: no order to choose
             continue
@@ -388,7 +387,6 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
             if misses == 2:
                 break
             continue
-        each = _per_response(fit, prep.measured[rows if check is None else check])
         # more modes are kept when they predict any response better: a sensor on a beam whose mode the
         # others barely see must get its mode too
         if kept is None or np.any((each < 0.9 * kept[0]) & (kept[0] - each > 0.005)):
