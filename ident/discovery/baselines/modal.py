@@ -462,7 +462,7 @@ class ModalBaseline(Baseline):
         # i conj(lz_r), whatever the excitation's participation (a second, complex coefficient for a
         # voltage-driven shaker's complex participation would be the same direction again)
         out = []
-        for r in self._modes(lz):
+        for r in self._modes(lz):  # the dominant mode's first: one_sign keeps it in every subset
             e = np.zeros(m, complex)
             e[r] = lz[r] * self._omega2i()[r]
             out.append(without_feedthrough(lz, e))
