@@ -356,6 +356,7 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
     if keep.sum() < 8:
         raise ValueError("the excitation has power on too few frequency lines in the band to fit a modal model")
     f, H = f[keep], H[:, keep]
+    scored = prep.measured[rows if check is None else check]
     kept, misses = None, 0
     for m in range(1, min(max_modes, keep.sum() // 4) + 1):
         # two starts per order, the better refined one kept: vector fitting's poles, and poles at the
@@ -372,7 +373,7 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
                 C, fit = fit_residues(poles, prep, rows, at=check)
             except NUMERIC_FAILURES:
                 continue
-            tried.append((_per_response(fit, prep.measured[rows if check is None else check]), poles, C))
+            tried.append((_per_response(fit, scored), poles, C))
         if not tried:
             break
         each, poles, C = min(tried, key=lambda t: float(np.sum(t[0])))
