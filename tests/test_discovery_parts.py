@@ -20,7 +20,7 @@ from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, force_series, law_parameters
 from ident.discovery.baselines import Location
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
-from ident.discovery.search import Candidate, one_sign, paired_p, predict
+from ident.discovery.search import Candidate, one_sign, paired_p, predict, signed_rank_p
 from ident.discovery.signals import convert, frf, impulsive, miso_frf, prepare
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
@@ -303,6 +303,24 @@ def test_paired_test_is_students_on_the_differences():
     a = rng.uniform(0.5, 1.0, 12)
     b = a - rng.normal(0.05, 0.05, 12)
     assert paired_p(a, b) == pytest.approx(ttest_rel(a, b, alternative="greater").pvalue, rel=1e-9)
+
+
+def test_the_test_against_the_baseline_is_the_exact_signed_rank_test_and_holds_a_heavy_tail():
+    # an effect that acts strongly in one piece and a little in most: 10 of 12 pieces better, one by 30
+    # times the others; the t-test's variance is that one piece, the rank test counts the pieces
+    a = np.full(12, 1.0)
+    d = np.array([1.5, 0.01, 0.02, 0.015, 0.03, 0.025, 0.012, 0.018, 0.022, 0.027, -0.005, -0.008])
+    b = a - d
+    # the exact one-sided p by enumerating all 2^12 sign patterns of the ranks (no ties, no zeros)
+    ranks = np.argsort(np.argsort(np.abs(d))) + 1
+    w = ranks[d > 0].sum()
+    signs = (np.arange(2**12)[:, None] >> np.arange(12)) & 1
+    exact = np.mean(signs @ ranks >= w)
+    assert signed_rank_p(a, b) == pytest.approx(exact, rel=1e-9)
+    assert exact < 0.01 < 0.05 < paired_p(a, b)
+    # nothing better anywhere: no evidence; a diverged candidate never wins
+    assert signed_rank_p(a, a) == 1.0
+    assert signed_rank_p(a, np.where(np.arange(12) == 3, np.inf, b)) == 1.0
 
 
 def test_splits_hold_out_two_blocks_in_five_and_refuse_overlap():
