@@ -321,6 +321,9 @@ def test_the_test_against_the_baseline_is_the_exact_signed_rank_test_and_holds_a
     # nothing better anywhere: no evidence; a diverged candidate never wins
     assert signed_rank_p(a, a) == 1.0
     assert signed_rank_p(a, np.where(np.arange(12) == 3, np.inf, b)) == 1.0
+    # four pieces, all better: the rank test's p could not go below 1/16, so the t-test decides
+    four = np.array([0.0266, 0.04, 0.0106, 0.0109])
+    assert signed_rank_p(a[:4], a[:4] - four) == paired_p(a[:4], a[:4] - four) < 0.05
 
 
 def test_splits_hold_out_two_blocks_in_five_and_refuse_overlap():
