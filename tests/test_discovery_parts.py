@@ -306,8 +306,8 @@ def test_paired_test_is_students_on_the_differences():
 
 
 def test_the_test_against_the_baseline_is_the_exact_signed_rank_test_and_holds_a_heavy_tail():
-    # an effect that acts strongly in one piece and a little in most: 10 of 12 pieces better, one by 30
-    # times the others; the t-test's variance is that one piece, the rank test counts the pieces
+    # an effect that acts strongly in one piece and a little in most: 10 of 12 pieces better, one by some
+    # 70 times the others; the t-test's variance is that one piece, the rank test counts the pieces
     a = np.full(12, 1.0)
     d = np.array([1.5, 0.01, 0.02, 0.015, 0.03, 0.025, 0.012, 0.018, 0.022, 0.027, -0.005, -0.008])
     b = a - d
