@@ -17,7 +17,8 @@ from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import free_decay
 from ident.discovery.baselines.modal import ModalBaseline, drivable, fit_model, peak_poles, underlying_poles
 from ident.discovery.baselines.rig import RigBaseline
-from ident.discovery.catalogue import CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, force_series, law_parameters
+from ident.discovery.catalogue import (CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, equivalent_coefficient, force_series,
+                                      law_parameters)
 from ident.discovery.baselines import Location
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
 from ident.discovery.search import Candidate, one_sign, paired_p, predict, signed_rank_p
@@ -201,6 +202,28 @@ def test_iwan_joint_dissipates_the_analytic_energy_per_cycle(onset):
     expected = np.sum(4 * (k / N_IWAN) * d * np.clip(A - d, 0, None))
     assert expected > 0 and np.count_nonzero(d < A) == {0.0: 9, 0.4: 8, 0.8: 5}[onset]
     assert area == pytest.approx(expected, rel=2e-3)
+
+
+@pytest.mark.parametrize("cause", ["quadratic_damping", "coulomb_friction", "hysteretic_joint"])
+def test_a_strong_start_is_worth_its_share_of_the_modes_stiffness_or_damping(cause):
+    # the refit's strong starts (search._strong_starts): the coefficient whose first harmonic on a sinusoid
+    # of the RMS velocity is the given share of the mode's damping 2 zeta w (drag, dry friction) or of its
+    # stiffness w^2 (a joint that has slipped through), read here off the kernel's own force by projecting
+    # it on the velocity or the displacement over whole cycles
+    w, zeta, level, v_rms = 2 * np.pi * 12.0, 0.02, 0.7, 0.05
+    amp = np.sqrt(2) * v_rms
+    c = CAUSES[cause]
+    coef = equivalent_coefficient(c, level, w, zeta, v_rms)
+    t = np.linspace(0, 4 * 2 * np.pi / w, 400001)
+    v = amp * np.cos(w * t)
+    z = amp / w * np.sin(w * t)
+    shape = {"eps": 1e-6 * amp} if cause == "coulomb_friction" else {"slip": 1e-4 * amp / w, "onset": 0.0}
+    p = law_parameters(c, shape) * np.r_[coef, np.ones(3)]
+    f = force_series(c.code, p, z, v)
+    if cause == "hysteretic_joint":  # the force takes stiffness away: -k z once every element slips
+        assert -np.sum(f * z) / np.sum(z * z) == pytest.approx(level * w**2, rel=1e-3)
+    else:
+        assert np.sum(f * v) / np.sum(v * v) == pytest.approx(level * 2 * zeta * w, rel=1e-3)
 
 
 def test_band_limited_conversion_of_a_sine_is_exact_in_the_band():

@@ -68,6 +68,9 @@ class Cause:
     kind: str = "mechanical"  # or "sensor"
     separates_by: str = ""  # the test that would tell this cause from a look-alike
     backbone_power: float | None = None  # a free decay's frequency shift grows with amplitude**power
+    # a refit of a fitted linear part with the cause in place also starts from these strengths: shares of
+    # the location's mode's stiffness (omega^2) or damping (2 zeta omega), as ``equivalent_coefficient``
+    starts: tuple[float, ...] = ()
 
     @property
     def order(self) -> int:
@@ -87,15 +90,17 @@ CAUSES: dict[str, Cause] = {c.name: c for c in (
           positive=False, backbone_power=1.0,
           separates_by="a stepped sine at three or more levels: the shift grows with amplitude, not its square"),
     Cause("coulomb_friction", COULOMB, (Parameter("force_per_mass", "m/s^2", "friction force per modal mass"),),
-          separates_by="a low level: dry friction damps small motion most (equivalent damping ~ 1/amplitude)"),
+          separates_by="a low level: dry friction damps small motion most (equivalent damping ~ 1/amplitude)",
+          starts=(0.3, 1.0, 3.0)),
     Cause("quadratic_damping", QDAMP, (Parameter("coefficient_per_mass", "1/m", "drag coefficient per modal mass"),),
-          separates_by="a high level: drag damps large motion most (equivalent damping ~ amplitude)"),
+          separates_by="a high level: drag damps large motion most (equivalent damping ~ amplitude)",
+          starts=(0.3, 1.0, 3.0)),
     Cause("hysteretic_joint", JOINT,
           (Parameter("stiffness_per_mass", "1/s^2", "joint stiffness lost when it slips, per modal mass"),),
           (Parameter("slip", "m", "displacement across the joint at which its strongest element slips"),
            Parameter("onset", "", "share of that slip below which no element slips (0: microslip from rest)")),
           separates_by="a stepped sine at several levels: a joint softens and damps more as it slips, "
-                       "a friction damper does not soften"),
+                       "a friction damper does not soften", starts=(0.03, 0.1, 0.3)),
     Cause("linear_mismatch", LINEAR,
           (Parameter("stiffness_per_mass", "1/s^2", "missing stiffness per modal mass"),
            Parameter("damping_per_mass", "1/s", "missing damping per modal mass")), positive=False,
@@ -211,6 +216,21 @@ def shapes(cause: Cause, z: np.ndarray, v: np.ndarray, n_grid: int = 24) -> list
     if cause.code == LINEAR:
         return [({}, np.column_stack([z, v]))]
     return [({}, _law_series(cause.code, law_parameters(cause, {}), z, v)[:, None])]
+
+
+def equivalent_coefficient(cause: Cause, level: float, omega: float, zeta: float, v_rms: float) -> float:
+    """The coefficient whose linear equivalent is ``level`` times a mode's stiffness or damping per unit
+    modal mass (omega^2, 2 zeta omega), on a sinusoid of velocity amplitude sqrt(2) v_rms (first-order
+    describing functions, Worden & Tomlinson 2001, ch. 2): a joint that has fully slipped has lost its
+    stiffness k; drag c2 v|v| damps like 8 c2 V / (3 pi); dry friction F like 4 F / (pi V)."""
+    v = np.sqrt(2.0) * v_rms
+    if cause.code == JOINT:
+        return level * omega**2
+    if cause.code == QDAMP:
+        return level * 2 * zeta * omega * 3 * np.pi / (8 * v) if v > 0 else 0.0
+    if cause.code == COULOMB:
+        return level * 2 * zeta * omega * np.pi * v / 4
+    raise ValueError(f"{cause.name} has no strength to start from")
 
 
 def friction_eps(v: np.ndarray) -> float:
