@@ -77,13 +77,17 @@ def test_a_duffing_gets_one_mode_and_its_cubic_with_the_physical_coefficient(cas
 def test_a_gain_that_is_only_the_refitted_linear_parts_is_not_a_finding(cases):
     # refitting the linear part with a force on the measured motion as an extra input improves it
     # whatever the force (the force takes up the blows' ringing and the missing mode): a Coulomb
-    # friction gained 0.63 over the baseline that way and was reported beside the true contact
+    # friction gained 0.63 over the baseline that way and was reported beside the true contact. Since the
+    # strong starts (43fcfe8) the quadratic damping that was found here has 0.016 over its own linear part
+    # too, and the answer is "nothing" (the contact itself is a known miss, below)
     c, d, _ = cases[3]
     assert (c.cause, c.location) == ("contact", "tip1")
     assert d.baseline_test_nrmse > 1.0  # the one-mode baseline: worse than predicting zero
     refitted = [x for x in d.candidates if x.baseline is not None and np.isfinite(x.own_gain)]
-    assert any(x.gain > 0.5 and x.own_gain < 0.03 for x in refitted)  # gains that are the linear part's
-    assert d.findings and all(x.own_gain > 0.03 for x in d.findings if x.baseline is not None), d.verdict()
+    borrowed = [x for x in refitted if x.gain > 0.5 and x.own_gain < 0.03]  # gains that are the linear part's
+    assert borrowed
+    assert not any(f is x for f in d.findings for x in borrowed), d.verdict()
+    assert all(x.own_gain > 0.03 for x in d.findings if x.baseline is not None), d.verdict()
 
 
 # Known misses since force gains lost their velocity feedthrough (``model.without_feedthrough``): on
@@ -98,8 +102,8 @@ def test_a_hidden_contact_comes_without_a_false_second_finding(cases):
     assert judge(c, d, 0.0).extra == 0, d.verdict()
 
 
-@pytest.mark.xfail(strict=True, reason="seed 3, a baseline worse than zero (1.50): quadratic damping at "
-                   "gain 0.52 with 0.072 over its own linear part, ahead of the contact (0.39, own -0.001)")
+@pytest.mark.xfail(strict=True, reason="seed 3, a baseline worse than zero (1.50): nothing found; the refined "
+                   "contact gains 0.39 over the baseline and -0.001 over its own linear part")
 def test_a_contact_behind_a_baseline_worse_than_zero_is_named(cases):
     c, d, _ = cases[3]
     v = judge(c, d, 0.0)
