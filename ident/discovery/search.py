@@ -475,7 +475,7 @@ def joint_refit(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared,
 
 
 def _strong_starts(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, split: Split, segs, warm: int,
-                   scale: np.ndarray, bound: float) -> Candidate:
+                   scale: np.ndarray, bound: float, err: float) -> tuple[Candidate, float]:
     """A cause fitted jointly with the linear part from its own regression, or from a strong cause.
 
     A linear part fitted to the record holds the cause's equivalent stiffness or damping at the record's
@@ -486,17 +486,18 @@ def _strong_starts(c: Candidate, baseline: Baseline, loc: Location, prep: Prepar
     from the regression, 1,094 /s^2 after a stiff start and the refinement, where the generator's joint
     loses 690; held-out gain 0.15 -> 0.31. Seed 94, drag: 0.1 /m from the regression, "nothing found";
     from the starts 43.5 /m where the generator has 43.6, gain 0.10. The start whose result simulates the
-    busiest training blocks best is kept."""
+    busiest training blocks (``segs``) best is kept; ``err`` is ``c``'s error there. Returns the kept
+    version and its error."""
     cause = CAUSES[c.cause]
     k0 = float(c.parameters.get(cause.coefficients[0].name, 0.0))
     if not cause.starts or not k0 > 0:
-        return c
+        return c, err
     poles = baseline.model.poles
     pole = poles[dominant_mode(baseline.coordinate_modes(loc), poles)]
     omega, zeta = float(abs(pole)), float(-pole.real / abs(pole))
     v_rms = float(np.sqrt(np.mean(loc.coordinate(prep)[1][split.rows("train")] ** 2)))
     shape = {p.name: c.parameters[p.name] for p in cause.shape}
-    best = (train_error(baseline, c, prep, segs, warm, scale, bound), c)
+    best = (err, c)
     for level in cause.starts:
         target = equivalent_coefficient(cause, level, omega, zeta, v_rms)
         if not (target > 0 and np.isfinite(target)):
@@ -512,7 +513,7 @@ def _strong_starts(c: Candidate, baseline: Baseline, loc: Location, prep: Prepar
         e = train_error(baseline, again, prep, segs, warm, scale, bound)
         if e < best[0]:
             best = (e, again)
-    return best[1]
+    return best[1], best[0]
 
 
 def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, split: Split, warm: int,
@@ -536,13 +537,13 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
     elif joint and c.baseline is None:
         c = joint_refit(c, baseline, loc, prep, split, warm, scale)
     segs = busiest(prep, split, loc.weights, settings.refine_blocks)
+    base_err = train_error(base0, c, prep, segs, warm, scale, bound)  # c's own linear part where it has one
     if joint and fit is None:
-        c = _strong_starts(c, base0, loc, prep, split, segs, warm, scale, bound)
+        c, base_err = _strong_starts(c, base0, loc, prep, split, segs, warm, scale, bound, base_err)
     baseline = c.baseline or baseline
     cause = CAUSES[c.cause]
     shape0 = {p.name: c.parameters[p.name] for p in cause.shape}
     n_el = len(c.elements)
-    base_err = train_error(baseline, c, prep, segs, warm, scale, bound)
 
     # how far a coefficient may move (log): a stopper's stiffness is uncertain by orders of magnitude
     # (displacement integrated from accelerations is smoothed over millisecond contacts), others are not
