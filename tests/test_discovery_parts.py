@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 from scipy.signal import freqz, lfilter
-from scipy.stats import ttest_rel
+from scipy.stats import ttest_1samp, ttest_rel
 
 from daq.sim.excitation import Excitation
 from daq.sim.rig import RigConfig, simulate_rig
@@ -21,7 +21,8 @@ from ident.discovery.catalogue import (CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, eq
                                       law_parameters)
 from ident.discovery.baselines import Location
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
-from ident.discovery.search import Candidate, one_sign, paired_p, predict, signed_rank_p
+from ident.discovery.search import (Candidate, clustered_p, one_sign, paired_p, pieces_per_block, predict,
+                                    signed_rank_p)
 from ident.discovery.signals import convert, frf, impulsive, miso_frf, prepare
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
@@ -326,6 +327,30 @@ def test_paired_test_is_students_on_the_differences():
     a = rng.uniform(0.5, 1.0, 12)
     b = a - rng.normal(0.05, 0.05, 12)
     assert paired_p(a, b) == pytest.approx(ttest_rel(a, b, alternative="greater").pvalue, rel=1e-9)
+
+
+def test_a_second_finding_is_tested_over_blocks_not_over_their_correlated_pieces():
+    # 8 blocks of 5 pieces; each block's pieces share most of its difference (one initial state, one
+    # stretch of input), as a simulation's error does: over 40 pieces the gain looks certain, over the
+    # 8 blocks it is not
+    rng = np.random.default_rng(7)
+    counts = pieces_per_block([slice(1010 * i, 1010 * (i + 1)) for i in range(8)], 200)
+    assert list(counts) == [5] * 8
+    per_block = np.array([0.06, -0.03, 0.05, 0.01, -0.02, 0.04, 0.0, 0.02])
+    d = np.repeat(per_block, 5) + rng.normal(0, 0.002, 40)
+    a = np.full(40, 1.0)
+    b = a - d
+    means = d.reshape(8, 5).mean(axis=1)
+    expected = ttest_1samp(means, 0.0, alternative="greater").pvalue
+    assert clustered_p(a, b, counts) == pytest.approx(expected, rel=1e-9)
+    assert paired_p(a, b) < 0.01 < 0.05 < clustered_p(a, b, counts)
+    # unequal blocks (a hammer record split by energy): each block's mean over its own pieces
+    counts = np.array([1, 1, 3, 35])
+    means = np.array([d[:1].mean(), d[1:2].mean(), d[2:5].mean(), d[5:].mean()])
+    assert clustered_p(a, b, counts) == pytest.approx(ttest_1samp(means, 0.0, alternative="greater").pvalue,
+                                                      rel=1e-9)
+    # a diverged side: never a gain
+    assert clustered_p(a, np.where(np.arange(40) == 7, np.inf, b), counts) == 1.0
 
 
 def test_the_test_against_the_baseline_is_the_exact_signed_rank_test_and_holds_a_heavy_tail():

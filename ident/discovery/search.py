@@ -151,18 +151,22 @@ def block_errors(baseline: Baseline, model: LinearModel, prep: Prepared, segs, w
     its error is counted in pieces of that many samples (an effect that acts in a few blocks, a contact
     met only near a sweep's resonance, then shows in many samples of the paired test)."""
     errs, sq, count = [], np.zeros(scale.size), 0
-    for seg in segs:
+    counts = pieces_per_block(segs, piece)
+    for seg, k in zip(segs, counts):
         y = predict(baseline, model, prep, seg, warm, output, bound)
         if not np.all(np.isfinite(y)):
-            n_pieces = sum(max(1, (s.stop - s.start) // piece) if piece else 1 for s in segs)
-            return np.full(n_pieces, np.inf), np.inf
+            return np.full(int(counts.sum()), np.inf), np.inf
         d = y - prep.measured[seg]
-        k = max(1, d.shape[0] // piece) if piece else 1
         for part in np.array_split(d, k):
             errs.append(float(np.mean(np.sqrt(np.mean(part**2, axis=0)) / scale)))
         sq += np.sum(d**2, axis=0)
         count += d.shape[0]
     return np.array(errs), float(np.mean(np.sqrt(sq / max(count, 1)) / scale))
+
+
+def pieces_per_block(segs, piece: int) -> np.ndarray:
+    """How many pieces of ``piece`` samples ``block_errors`` counts in each block (one without pieces)."""
+    return np.array([max(1, (s.stop - s.start) // piece) if piece else 1 for s in segs], int)
 
 
 def paired_p(a: np.ndarray, b: np.ndarray) -> float:
@@ -176,6 +180,21 @@ def paired_p(a: np.ndarray, b: np.ndarray) -> float:
     if sd == 0:
         return 0.0 if d.mean() > 0 else 1.0
     return float(student_t.sf(d.mean() / (sd / np.sqrt(n)), n - 1))
+
+
+def clustered_p(a: np.ndarray, b: np.ndarray, counts: np.ndarray) -> float:
+    """``paired_p`` with the pieces of each block taken together: the one-sided paired t-test over the
+    blocks' mean differences. The pieces of a block are not independent samples (one initial state read
+    off the data, one stretch of the excitation, a simulation error that carries from piece to piece),
+    so a test over pieces overstates the evidence. Independent seed 2, a contact found at tip 1: a
+    quadratic stiffness between the tips on top of it gained 0.03 at p = 0.020 over its 40 pieces, a
+    false second finding; over its 8 blocks p = 0.18. ``counts``: pieces per block
+    (``pieces_per_block``)."""
+    d = np.asarray(a, float) - np.asarray(b, float)
+    if not np.all(np.isfinite(d)) or d.size != int(np.sum(counts)):
+        return paired_p(a, b)
+    means = np.add.reduceat(d, np.concatenate([[0], np.cumsum(counts)[:-1]])) / counts
+    return paired_p(means, np.zeros_like(means))
 
 
 def signed_rank_p(a: np.ndarray, b: np.ndarray) -> float:
