@@ -198,4 +198,24 @@ def test_clock_estimator_recovers_offset_and_drift():
         est.update(a, b)
     offset, ppm = est.estimate()
     assert ppm == pytest.approx(150, abs=3)
-    assert offset == pytest.approx(5.0 + 1e-4, abs=1e-4)
+    assert offset == pytest.approx(5.0, abs=2e-5)  # the quickest reads' latency, not the mean's
+
+
+def test_clock_estimator_holds_its_drift_when_a_busy_host_reads_late():
+    # 3 s at 200 reads a second, the device 3000 ppm fast (-2991 ppm host seconds per device second);
+    # reads are late by up to 0.5 ms, and for half a second of every second a busy host reads them late
+    # by a latency that climbs to 40 ms: a line through the points follows the climb, the line under
+    # them does not
+    rng = np.random.default_rng(1)
+    t_dev = np.arange(600) / 200.0
+    busy = np.where((t_dev % 1.0) > 0.5, 0.08 * ((t_dev % 1.0) - 0.5), 0.0)
+    host = 2.0 + t_dev / 1.003 + rng.uniform(0, 5e-4, t_dev.size) + busy
+    est = ClockEstimator()
+    for a, b in zip(t_dev, host):
+        est.update(a, b)
+    offset, ppm = est.estimate()
+    expected = (1 / 1.003 - 1) * 1e6
+    assert ppm == pytest.approx(expected, abs=30)
+    assert offset == pytest.approx(2.0, abs=1e-4)
+    slope = np.polyfit(t_dev, host, 1)[0]  # least squares: what the estimator used to say
+    assert abs((slope - 1) * 1e6 - expected) > 500
