@@ -17,7 +17,8 @@ blocks, and select honestly.
    ``gain_floor``, it predicts better than zero, and it beats every simpler significant cause (a paired
    t-test: between two causes the size of the difference counts, not only its sign); a cause the data
    cannot tell from another (no significant difference either way) is reported as ambiguous, with the
-   test that would separate them. A second finding must add a significant gain on top of the first.
+   test that would separate them. A second finding must add a significant gain on top of the first, in
+   a test over whole blocks (``clustered_p``: the pieces of a block are not independent).
 Numerical failures (an optimiser or linear algebra that does not converge) make a failed candidate
 with its reason, never a crash.
 """
@@ -170,7 +171,7 @@ def pieces_per_block(segs, piece: int) -> np.ndarray:
 
 
 def paired_p(a: np.ndarray, b: np.ndarray) -> float:
-    """One-sided p-value that errors ``b`` are smaller than ``a`` (paired t-test over blocks): is the
+    """One-sided p-value that errors ``b`` are smaller than ``a`` (paired t-test over their pairs): is the
     mean error smaller? What two candidates are compared by, where the size of a difference counts."""
     d = np.asarray(a, float) - np.asarray(b, float)
     if not np.all(np.isfinite(d)):
