@@ -356,12 +356,12 @@ def _select(scored: list[Candidate], baseline: Baseline, prep: Prepared, split: 
     taken = {first.label} | {a.label for a in alike}
     rest = [c for c in scored if c.label not in taken and significant(c, settings) and c.elements
             and c.location != first.location][:4]
-    best2 = None
+    best2, counts = None, pieces_per_block(split.test, sc.piece)
     for c in rest:
         model = own.model.with_elements(first.elements + c.elements)
         errs, nrmse = block_errors(own, model, prep, split.test, sc.warm, sc.scale, first.output + c.output,
                                    sc.bound, sc.piece)
-        p = clustered_p(first.block_errors, errs, pieces_per_block(split.test, sc.piece))
+        p = clustered_p(first.block_errors, errs, counts)
         gain = 1.0 - nrmse / first.test_nrmse if np.isfinite(nrmse) else -np.inf
         if p < settings.alpha and gain > settings.gain_floor and (best2 is None or gain > best2[0]):
             best2 = (gain, c)
