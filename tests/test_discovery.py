@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from daq.sim.hidden import hidden_case
+from ident.cli.bench_discovery import Verdict, twin_report
 from ident.discovery import Channel, Measurement, discover
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CUBIC, law_parameters
@@ -109,3 +110,27 @@ def test_nan_in_the_data_is_one_line(tmp_path):
     np.savetxt(f, np.column_stack([t, x, x, x]), delimiter=",", header="t,base,tip1,tip2", comments="")
     out = _ident("discover", f, "--time", "t")
     assert out.returncode == 2 and "NaN" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_twins_need_the_independent_generator():
+    out = _ident("bench", "discovery", "--generator", "rig", "--twins", "--cases", "1")
+    assert out.returncode == 2 and "--twins needs the independent generator" in out.stderr
+    assert "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_the_twin_report_counts_findings_on_twins_and_each_effects_share_of_the_error():
+    """Two cases and their twins: a contact whose twin the baseline predicts at 0.02 where it predicted the
+    case at 0.40 (the effect is 1 - 0.02 / 0.40 = 95 % of the error, named right), a drag at 0.101 against
+    0.100 (1 %: below the 3 % gain floor, nothing named); the drag's twin gets a false cubic."""
+    def v(seed, cause, named, right, nrmse, twin=False, detail=()):
+        return Verdict(seed, "rig_base", cause, named, "tip1" if named != "nothing" else "", right, 0, None, None,
+                       1.0, "", list(detail), nrmse, twin)
+    text = twin_report([v(1, "contact", "contact", True, 0.40), v(1, "none", "nothing", True, 0.02, True),
+                        v(2, "quadratic_damping", "nothing", False, 0.101),
+                        v(2, "none", "cubic_stiffness", False, 0.100, True, ["cubic_stiffness at tip1 gain 0.04"])])
+    lines = text.splitlines()
+    assert lines[0] == "twins (each case run without its effect): 1/2 with a finding"
+    assert lines[1] == "  seed 2 (quadratic_damping removed): cubic_stiffness at tip1 gain 0.04"
+    assert "contact             median   0.95; below the floor 0/1 (named right 0), above 1 (named right 1)" in text
+    assert "quadratic_damping   median   0.01; below the floor 1/1 (named right 0), above 0 (named right 0)" in text
+    assert lines[-1].endswith(": 1/1")

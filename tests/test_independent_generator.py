@@ -343,6 +343,48 @@ def test_discovery_families(family, cause, seed):
         assert truth["excitation"] == "voltage:voltage" and "shaker" in truth["structure"]
 
 
+def test_the_twin_of_a_case_without_an_effect_is_the_same_record():
+    """A twin runs the case's draws without the effect: where there is none, nothing changes, bit for bit."""
+    case = discovery_case(3, "duffing", "none")
+    twin = discovery_case(3, "duffing", "none", twin=True)
+    assert case.columns.keys() == twin.columns.keys()
+    for name in case.columns:
+        np.testing.assert_array_equal(case.columns[name], twin.columns[name], err_msg=name)
+    assert twin.truth["cause"] == "none" and twin.truth["twin_of"]["cause"] == "none"
+
+
+def _receptance_error(case: Case, mass: float, f0: float, zeta: float) -> float:
+    """Median relative error, over 0.5-1.5 f0, of the record's H1 force -> displacement estimate against
+    the single-mode receptance 1 / (k - m w^2 + i c w) (the sensors' signs undone)."""
+    signs = case.truth["signs"]
+    force, x = signs["force"] * case.columns["force"], signs["x1"] * case.columns["x1"]
+    f, pfx = scipy.signal.csd(force, x, case.fs_hz, nperseg=4096)
+    _, pff = scipy.signal.welch(force, case.fs_hz, nperseg=4096)
+    w, w0 = 2 * np.pi * f, 2 * np.pi * f0
+    exact = 1.0 / (mass * w0**2 - mass * w**2 + 2j * zeta * w0 * mass * w)
+    band = (f > 0.5 * f0) & (f < 1.5 * f0)
+    return float(np.median(np.abs(pfx[band] / pff[band] - exact[band]) / np.abs(exact[band])))
+
+
+def test_a_twin_is_the_linear_structure_its_case_departs_from():
+    """Seed 0's hardening Duffing oscillator (force in, displacement out, noise of growing amplitude) and its
+    twin: the same structure, drive and instruments, without the cubic. The twin's frequency response is
+    the linear oscillator's receptance from the truth's mass, frequency and damping (within the 2 %
+    calibration gains and the noise); the case's is not."""
+    case = discovery_case(0, "duffing", "cubic_stiffness")
+    twin = discovery_case(0, "duffing", "cubic_stiffness", twin=True)
+    assert twin.truth["cause"] == "none" and twin.truth["effect_strength"] == 0.0 and twin.truth["location"] is None
+    assert twin.truth["twin_of"]["cause"] == "cubic_stiffness" and twin.truth["twin_of"]["effect_strength"] > 0.05
+    for key in ("signs", "card", "structure", "excitation_signal"):
+        assert twin.truth[key] == case.truth[key], key
+    assert {c: i["snr_db"] for c, i in twin.truth["channels"].items()} == \
+        {c: i["snr_db"] for c, i in case.truth["channels"].items()}
+    st = case.truth["structure"]
+    linear = _receptance_error(twin, st["mass_kg"], st["natural_frequency_hz"], st["damping_ratio"])
+    hardening = _receptance_error(case, st["mass_kg"], st["natural_frequency_hz"], st["damping_ratio"])
+    assert linear < 0.04 and hardening > 3 * linear
+
+
 def test_a_seed_gives_the_same_digits_whatever_the_callers_blas_threads():
     """Seed 31 (a clamped-clamped beam) came out with other digits under two BLAS threads than under one
     before the case builders pinned one thread: a Dask worker (one thread) and pytest (the machine's
@@ -394,3 +436,15 @@ def test_write_case_never_overwrites(tmp_path):
         write_case(case, folder)
     assert sorted(p.name for p in folder.iterdir()) == ["case.csv", "truth.json"]
     assert campaign_main(["campaign", str(tmp_path), "--cases", "1", "--seed", "0"]) == 2
+
+
+def test_a_campaign_with_twins_writes_each_twin_after_its_case(tmp_path, capsys):
+    out = tmp_path / "c"
+    argv = ["campaign", str(out), "--cases", "1", "--seed", "0", "--family", "duffing", "--cause", "cubic_stiffness",
+            "--twins"]
+    assert campaign_main(argv) == 0
+    index = json.loads((out / "campaign.json").read_text())
+    assert [e["folder"] for e in index] == ["000_seed0_duffing_cubic_stiffness", "000_seed0_duffing_none_twin"]
+    assert index[1]["cause"] == "none" and index[1]["twin_of"]["cause"] == "cubic_stiffness"
+    truth = json.loads((out / index[1]["folder"] / "truth.json").read_text())
+    assert truth["twin_of"]["effect_strength"] == pytest.approx(index[0]["effect_strength"])

@@ -47,6 +47,9 @@ def add_parser(sub) -> None:
                    help="discovery: daq.sim.independent (written apart from ident; default) or daq.sim.hidden "
                         "(this project's rig model with one effect)")
     p.add_argument("--seed", type=SEED, default=0, help="discovery: first seed; batch: the campaign's seed")
+    p.add_argument("--twins", action="store_true",
+                   help="discovery (independent generator): also run each case without its effect: the findings "
+                        "made where there is nothing, and each effect's share of the baseline's error")
     p.add_argument("--duration", type=DURATION, help=f"discovery: the rig generator's case length (default "
                                                        f"{RIG_CASE_S:g} s); batch: each recording's (default 8 s)")
     p.add_argument("--campaign", type=Path, help="batch: the campaign's folder (made there if missing or empty, "
@@ -94,8 +97,10 @@ def run(args) -> int:
         if args.duration is not None and args.generator != "rig":
             raise ValueError("--duration sets the rig generator's case length; the independent generator's cases "
                              "have their own")
+        if args.twins and args.generator != "independent":
+            raise ValueError("--twins needs the independent generator: daq.sim.hidden has no twins")
         return run_discovery(args.generator, args.cases, args.seed, args.workers, args.scheduler,
-                             args.duration or RIG_CASE_S)
+                             args.duration or RIG_CASE_S, args.twins)
     if args.what == "batch":
         if args.scheduler or args.workers is not None:
             raise ValueError("ident bench batch compares 1 and 2 local workers itself; --scheduler and --workers "

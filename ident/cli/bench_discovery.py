@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from daq.sim.hidden import hidden_case
 from daq.sim.independent.cases import discovery_case
 
 from ..discovery import Channel, Measurement, discover
+from ..discovery.search import Settings
 from ..rig import RigParams
 from .engine import ordered, session
 
@@ -77,6 +78,8 @@ class Verdict:
     seconds: float
     info: str = ""
     detail: list = field(default_factory=list)
+    baseline_nrmse: float | None = None  # the baseline's held-out NRMSE
+    twin: bool = False  # the case run without its effect (``independent_case(seed, twin=True)``)
 
 
 RIG_CASE_S = 40.0  # the rig generator's case length
@@ -116,20 +119,21 @@ def judge(case: Case, d, seconds: float) -> Verdict:
             perr = abs(found[fkey] / case.truth[tkey] - 1)
         gain = findings[0].gain
     return Verdict(case.seed, case.family, cause, named, loc, right, extra, perr, gain, seconds, case.info,
-                   [f"{f.label} gain {f.gain:.2f}" for f in findings])
+                   [f"{f.label} gain {f.gain:.2f}" for f in findings], float(d.baseline_test_nrmse))
 
 
-def run_case(args: tuple[str, int, float]) -> Verdict:
-    """One case (a Dask task): (generator, seed, the rig generator's case length in s)."""
-    generator, seed, duration_s = args
-    case = rig_case(seed, duration_s) if generator == "rig" else independent_case(seed)
+def run_case(args: tuple) -> Verdict:
+    """One case (a Dask task): (generator, seed, the rig generator's case length in s[, twin])."""
+    generator, seed, duration_s, *rest = args
+    twin = bool(rest and rest[0])
+    case = rig_case(seed, duration_s) if generator == "rig" else independent_case(seed, twin=twin)
     t0 = time.perf_counter()
     try:
         d = discover(case.measurement, rig=case.rig)
     except Exception as exc:  # noqa: BLE001 - a benchmark counts a crash as an error row and goes on
         return Verdict(seed, case.family, SYNONYMS.get(case.cause, case.cause), f"error: {exc}", "", False, 0, None,
-                       None, time.perf_counter() - t0, case.info)
-    return judge(case, d, time.perf_counter() - t0)
+                       None, time.perf_counter() - t0, case.info, twin=twin)
+    return replace(judge(case, d, time.perf_counter() - t0), twin=twin)
 
 
 def _joint_truth(eq: dict, effect: dict) -> dict:
@@ -147,10 +151,10 @@ def _joint_truth(eq: dict, effect: dict) -> dict:
     return truth
 
 
-def independent_case(seed: int, generated=None) -> Case:
+def independent_case(seed: int, generated=None, twin: bool = False) -> Case:
     """The generator's case ``seed`` as a measurement and its truth (``generated``: that case, if already
-    drawn)."""
-    c = generated or discovery_case(seed)
+    drawn; ``twin``: the case run without its effect, cause "none")."""
+    c = generated or discovery_case(seed, twin=twin)
     t = c.truth
     col, kind = t["excitation"].split(":")
     responses = tuple(Channel(n, k, np.asarray(c.columns[n], float)) for n, k in (r.split(":") for r in t["responses"]))
@@ -173,7 +177,9 @@ def independent_case(seed: int, generated=None) -> Case:
         # at their difference (seed 14: 1/511 of the cubic it put there); the element's own value is the
         # reference
         truth = {ours: t["effect"][theirs] for ours, theirs in ELEMENT.get(cause, {}).items()}
-    info = (f"{c.fs_hz:.0f} Hz, strength {t.get('effect_strength', 0):.2f}, "
+    mirrored = t.get("twin_of")
+    info = (f"{'twin of ' + mirrored['cause'] + ', ' if mirrored else ''}{c.fs_hz:.0f} Hz, "
+            f"strength {t.get('effect_strength', 0):.2f}, "
             f"{len(t.get('unmeasured_blows') or [])} blows, signs {''.join('+' if v > 0 else '-' for v in t['signs'].values())}")
     return Case(seed, c.family, m, None, cause, t.get("location") or "", truth, info)
 
@@ -207,23 +213,65 @@ def report(verdicts: list[Verdict], wall_s: float) -> str:
     return "\n".join(lines)
 
 
+def twin_report(verdicts: list[Verdict], gain_floor: float = Settings().gain_floor) -> str:
+    """What the twins (each case run without its effect) say: the findings made where there is nothing,
+    on exactly the structures, drives and instruments of the cases; and how much of the baseline's
+    held-out error each effect is at all, 1 - (twin's NRMSE / case's NRMSE), against the gain floor a
+    finding must pass (an effect that costs the linear model less cannot become a finding)."""
+    cases = {v.seed: v for v in verdicts if not v.twin}
+    twins = {v.seed: v for v in verdicts if v.twin}
+    if not twins:
+        return ""
+    false = [v for v in twins.values() if v.named != "nothing"]
+    lines = [f"twins (each case run without its effect): {len(false)}/{len(twins)} with a finding"
+             + "".join(f"\n  seed {v.seed} ({cases[v.seed].cause if v.seed in cases else '?'} removed): "
+                       f"{'; '.join(v.detail) or v.named}" for v in sorted(false, key=lambda v: v.seed))]
+    share = {}
+    for seed, v in cases.items():
+        t = twins.get(seed)
+        if v.cause != "none" and t and v.baseline_nrmse and t.baseline_nrmse is not None:
+            share[seed] = 1.0 - t.baseline_nrmse / v.baseline_nrmse
+    if share:
+        lines.append(f"the effect's share of the baseline's held-out error (1 - twin's NRMSE / case's), "
+                     f"against the gain floor {gain_floor:g}:")
+        for c in sorted({cases[s].cause for s in share}):
+            mine = [s for s in share if cases[s].cause == c]
+            low = [s for s in mine if share[s] < gain_floor]
+            high = [s for s in mine if s not in low]
+            lines.append(f"  {c:19s} median {np.median([share[s] for s in mine]):6.2f}; below the floor "
+                         f"{len(low)}/{len(mine)} (named right {sum(cases[s].right for s in low)}), above "
+                         f"{len(high)} (named right {sum(cases[s].right for s in high)})")
+        high = [s for s in share if share[s] >= gain_floor]
+        lines.append(f"named right where the effect is at least the gain floor of the baseline's error: "
+                     f"{sum(cases[s].right for s in high)}/{len(high)}")
+    return "\n".join(lines)
+
+
 def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: int | None = None,
-                  scheduler: str | None = None, duration_s: float = RIG_CASE_S) -> int:
+                  scheduler: str | None = None, duration_s: float = RIG_CASE_S, twins: bool = False) -> int:
     """The benchmark: in this process, or on a local Dask cluster of ``workers`` processes, or on the
-    cluster at ``scheduler``; the lines in seed order either way."""
+    cluster at ``scheduler``; the lines in seed order either way. ``twins``: each independent case is
+    also run without its effect (``twin_report``)."""
     t0 = time.perf_counter()
-    jobs = [(generator, s, duration_s) for s in range(first_seed, first_seed + n_cases)]
+    jobs = [(generator, s, duration_s, twin) for s in range(first_seed, first_seed + n_cases)
+            for twin in ((False, True) if twins else (False,))]
     verdicts = []
     with session(scheduler, workers) as client:
         for v in ordered(client, run_case, jobs, "discovery"):
             verdicts.append(v)
             _print(v)
     print()
-    print(report(verdicts, time.perf_counter() - t0))
+    print(report([v for v in verdicts if not v.twin], time.perf_counter() - t0))
+    if twins:
+        print(twin_report(verdicts))
     return 0
 
 
 def _print(v: Verdict) -> None:
+    if v.twin:
+        print(f"twin {v.seed:4d} {v.family:12s} {'(' + v.cause + ')':18s} -> {v.named:18s} {v.location:10s}"
+              f"  [{v.seconds:.0f} s] {'; '.join(v.detail)}  ({v.info})", flush=True)
+        return
     mark = "" if v.right else "  WRONG"
     print(f"case {v.seed:4d} {v.family:12s} {v.cause:18s} -> {v.named:18s} {v.location:10s}"
           f"{'' if v.extra == 0 else f' +{v.extra} extra'}{mark}  [{v.seconds:.0f} s] {'; '.join(v.detail)}"

@@ -4,13 +4,14 @@ data its own model did not make.
 
 Public API:
 
-- ``discovery_case(seed, family=None, cause=None) -> Case``: one structure with one hidden cause
-  (cases.FAMILIES, cases.CAUSES), its excitation and instruments, and the truth.
+- ``discovery_case(seed, family=None, cause=None, twin=False) -> Case``: one structure with one hidden
+  cause (cases.FAMILIES, cases.CAUSES), its excitation and instruments, and the truth; ``twin``: the
+  same draws run without the effect (truth cause "none", the mirrored effect under ``twin_of``).
 - ``regime_case(seed, fs_hz=None, segment_s=(10, 30)) -> Case`` and
   ``steady_case(seed, regime, minutes=10, fs_hz=1000) -> Case``: the two-beam rig with stoppers, for a
   regime monitor (per-sample truth in ``Case.truth_series``).
 - ``write_case(case, folder)``: ``case.csv``, ``truth.json`` (and ``truth.csv``), never overwriting.
-- ``python -m daq.sim.independent campaign OUT_DIR --cases N --seed S [--family F]``.
+- ``python -m daq.sim.independent campaign OUT_DIR --cases N --seed S [--family F] [--twins]``.
 
 Modules: beams (finite elements), modal (reduction), elements (nonlinear forces), integrate (compiled
 RK4), excitation (signals), sensors (instrument chain), experiment (set-up and run), rig (two-beam rig),

@@ -2,7 +2,8 @@
 
 Case i uses seed S + i, so any case can be regenerated alone. OUT_DIR must be missing or empty; each
 case gets a folder NNN_seedS_family_cause (case.csv, truth.json, and truth.csv for regime cases), and
-campaign.json lists them.
+campaign.json lists them. With ``--twins`` each discovery case's twin (the same draws without the
+effect) follows it in a folder NNN_seedS_family_none_twin.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--kind", choices=["discovery", "regimes", "steady"], default="discovery")
     c.add_argument("--family", choices=sorted(FAMILY_CAUSES), help="discovery: only this family")
     c.add_argument("--cause", help="discovery: only this cause")
+    c.add_argument("--twins", action="store_true", help="discovery: each case's twin too (without the effect)")
     c.add_argument("--regime", choices=list(REGIMES), help="steady: the regime (default: cycle through all)")
     c.add_argument("--minutes", type=float, default=10.0, help="steady: record length")
     c.add_argument("--fs", type=int, help="regimes/steady: output rate (Hz)")
@@ -55,13 +57,18 @@ def main(argv: list[str] | None = None) -> int:
             regime = args.regime or list(REGIMES)[i % len(REGIMES)]
             case = steady_case(seed, regime, minutes=args.minutes, fs_hz=args.fs or 1000)
             label = f"steady_{regime}"
-        folder = write_case(case, out / f"{i:03d}_seed{seed}_{label}")
-        seconds = time.perf_counter() - t0
-        summary = {"folder": folder.name, "seed": seed, "family": case.family, "seconds": seconds}
-        summary |= {k: case.truth[k] for k in ("cause", "location", "effect_strength", "regime_share")
-                    if k in case.truth}
-        index.append(summary)
-        print(json.dumps(jsonable(summary)), flush=True)
+        made = [(case, label)]
+        if args.kind == "discovery" and args.twins:
+            made.append((discovery_case(seed, family=args.family, cause=args.cause, twin=True),
+                         f"{case.family}_none_twin"))
+        for c, name in made:
+            folder = write_case(c, out / f"{i:03d}_seed{seed}_{name}")
+            seconds = time.perf_counter() - t0
+            summary = {"folder": folder.name, "seed": seed, "family": c.family, "seconds": seconds}
+            summary |= {k: c.truth[k] for k in ("cause", "location", "effect_strength", "regime_share", "twin_of")
+                        if k in c.truth}
+            index.append(summary)
+            print(json.dumps(jsonable(summary)), flush=True)
     (out / "campaign.json").write_text(json.dumps(jsonable(index), indent=1) + "\n")
     return 0
 

@@ -11,6 +11,13 @@ equivalent viscous damping at the RMS amplitude is 0.5-2 times c_ref below, a jo
 elements hold 40-80 % of its stiffness and start slipping at 5-30 % to 80-200 % of the peak rotation),
 then runs the record with the effect and measures it.
 
+`discovery_case(seed, twin=True)` is the same case's *twin*: every draw the same (structure, drive,
+levels, instruments, the noise sequence), the record run without the effect (a friction joint stays
+stuck, the clamped-clamped beam has no membrane stretching). Its truth is cause "none", with the case
+it mirrors under `twin_of`. Twins show whether a method names causes where there are none on exactly
+the structures it is judged on, and how much of a case's error is the effect's at all: until its first
+contact, a stopper's case and its twin are the same record (tested).
+
 The truth's `effect_strength` is RMS(f_nl) / RMS(k_static u) over the record, f_nl the element's force
 (for a joint: its departure from the stuck joint; for membrane stretching: its generalised force on mode
 1, against omega_1^2 q_1), u the effect's coordinate and k_static the linear structure's static stiffness
@@ -385,7 +392,7 @@ def _base_velocity(r: Run, setup: Setup) -> np.ndarray:
     return base_velocity(r.drive_samples[setup.base_drive], 2 * r.rate_hz)[::2]
 
 
-def _finish(rng: np.random.Generator, draft: Draft, cause: str, seed: int) -> Case:
+def _finish(rng: np.random.Generator, draft: Draft, cause: str, seed: int, twin: bool = False) -> Case:
     stats = _preview(draft)
     if draft.family == "cc_beam":
         k3pm = _membrane_k3_per_mass(draft)
@@ -412,6 +419,11 @@ def _finish(rng: np.random.Generator, draft: Draft, cause: str, seed: int) -> Ca
     else:
         raise RuntimeError("the simulation diverged even with a weakened effect")
     truth = _truth(draft, cause, params, generic, r, stats, rate)
+    if twin:  # the same draws, run without the effect: the effect's own truth kept as what it mirrors
+        r = run(replace(setup, elements=[], membrane=None), draft.fs_hz, draft.duration_s, rate_hz=rate)
+        mirrored = {k: truth[k] for k in ("cause", "location", "position", "effect", "effect_strength")}
+        truth = _truth(replace(draft, site=replace(draft.site, location=None)), "none", {}, {}, r, stats, rate)
+        truth["twin_of"] = mirrored
     card = draws.draw_card(rng, draft.fs_hz)
     columns = {"t": np.arange(r.n_out) / draft.fs_hz}
     kinds, units, instruments = {"t": "time"}, {"t": "s"}, {}
@@ -464,8 +476,9 @@ def _truth(draft: Draft, cause: str, params: dict, generic: dict, r: Run, stats:
 
 
 @seeded
-def discovery_case(seed: int, family: str | None = None, cause: str | None = None) -> Case:
-    """A seeded discovery case; family and cause are drawn unless given."""
+def discovery_case(seed: int, family: str | None = None, cause: str | None = None, twin: bool = False) -> Case:
+    """A seeded discovery case; family and cause are drawn unless given. ``twin``: the same case run
+    without its effect (the module docstring)."""
     rng = np.random.default_rng(seed)
     family = family or draws.pick(rng, FAMILIES)
     if family not in FAMILY_CAUSES:
@@ -481,4 +494,4 @@ def discovery_case(seed: int, family: str | None = None, cause: str | None = Non
         draft = _chain_draft(rng, cause)
     else:
         draft = _cc_beam_draft(rng, cause)
-    return _finish(rng, draft, cause, seed)
+    return _finish(rng, draft, cause, seed, twin)
