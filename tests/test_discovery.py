@@ -9,12 +9,13 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from daq.sim.hidden import hidden_case
-from ident.cli.bench_discovery import Verdict, twin_report
+from ident.cli.bench_discovery import Case, Verdict, judge, twin_report
 from ident.discovery import Channel, Measurement, discover
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CUBIC, law_parameters
@@ -134,3 +135,17 @@ def test_the_twin_report_counts_findings_on_twins_and_each_effects_share_of_the_
     assert "contact             median   0.95; below the floor 0/1 (named right 0), above 1 (named right 1)" in text
     assert "quadratic_damping   median   0.01; below the floor 1/1 (named right 0), above 0 (named right 0)" in text
     assert lines[-1].endswith(": 1/1")
+
+
+def test_a_clipping_found_where_the_generator_clipped_is_not_a_false_finding():
+    """The independent generator clips some channels (a range set below the signal's peak), as real
+    instruments do: a clipping found on such a response is true. On a case without an effect it is set
+    aside, not counted as a false finding; on another response it is one."""
+    clip = Candidate("clipping", "tip1", {"range": 7.2}, output=((0, "clip", 7.2),), gain=0.05)
+    case = Case(95, "rig_force", None, None, "none", "", {}, "", frozenset({"tip1"}))
+    d = SimpleNamespace(findings=[clip], ambiguous=[[]], baseline_test_nrmse=0.1)
+    v = judge(case, d, 0.0)
+    assert (v.named, v.right, v.extra) == ("nothing", True, 0)
+    assert v.detail == ["clipping at tip1 gain 0.05 (clipped there: true)"]
+    other = judge(Case(95, "rig_force", None, None, "none", "", {}, "", frozenset({"tip2"})), d, 0.0)
+    assert (other.named, other.right, other.extra) == ("clipping", False, 1)

@@ -62,6 +62,7 @@ class Case:
     location: str  # a column, or "A-B"
     truth: dict  # parameters in this catalogue's names
     info: str = ""
+    clipped: frozenset = frozenset()  # responses the generator's instruments clipped (a true clipping finding)
 
 
 @dataclass
@@ -98,11 +99,16 @@ def _same_location(found: str, truth: str) -> bool:
 
 
 def judge(case: Case, d, seconds: float) -> Verdict:
+    """The first finding against the true cause and location, and the findings that are not the truth. A
+    clipping found at a response the generator's instrument clipped is the truth too: neither the cause
+    sought nor a false finding, it is set aside before judging (and shown in the detail)."""
     cause = SYNONYMS.get(case.cause, case.cause)
-    findings = d.findings
+    kept = [(f, a) for f, a in zip(d.findings, d.ambiguous)
+            if not (f.cause == "clipping" and f.location in case.clipped)]
+    findings, ambiguous = [f for f, _ in kept], [a for _, a in kept]
     if not findings:
         named, loc, right = "nothing", "", cause == "none"
-    elif d.ambiguous[0]:
+    elif ambiguous[0]:
         named, loc, right = "ambiguous", findings[0].location, False
     else:
         named, loc = findings[0].cause, findings[0].location
@@ -119,7 +125,8 @@ def judge(case: Case, d, seconds: float) -> Verdict:
             perr = abs(found[fkey] / case.truth[tkey] - 1)
         gain = findings[0].gain
     return Verdict(case.seed, case.family, cause, named, loc, right, extra, perr, gain, seconds, case.info,
-                   [f"{f.label} gain {f.gain:.2f}" for f in findings], float(d.baseline_test_nrmse))
+                   [f"{f.label} gain {f.gain:.2f}" + ("" if any(f is g for g in findings) else " (clipped there: true)")
+                    for f in d.findings], float(d.baseline_test_nrmse))
 
 
 def run_case(args: tuple) -> Verdict:
@@ -181,7 +188,8 @@ def independent_case(seed: int, generated=None, twin: bool = False) -> Case:
     info = (f"{'twin of ' + mirrored['cause'] + ', ' if mirrored else ''}{c.fs_hz:.0f} Hz, "
             f"strength {t.get('effect_strength', 0):.2f}, "
             f"{len(t.get('unmeasured_blows') or [])} blows, signs {''.join('+' if v > 0 else '-' for v in t['signs'].values())}")
-    return Case(seed, c.family, m, None, cause, t.get("location") or "", truth, info)
+    clipped = frozenset(n for n, i in t.get("channels", {}).items() if i.get("clipped_fraction", 0.0) > 0)
+    return Case(seed, c.family, m, None, cause, t.get("location") or "", truth, info, clipped)
 
 
 def report(verdicts: list[Verdict], wall_s: float) -> str:
