@@ -163,3 +163,20 @@ def test_a_drag_the_fitted_linear_part_had_absorbed_is_found_with_its_coefficien
     eq = generated.truth["equivalent"]
     assert damping(d.baseline.model) > 1.5 * eq["damping_ratio"]
     assert damping(f.baseline.model) == pytest.approx(eq["damping_ratio"], rel=0.3)
+
+
+
+@pytest.mark.xfail(strict=True, reason="a known false finding on a linear record (README, discovery: Twins)")
+def test_a_twin_without_its_effect_gets_no_finding_from_a_linear_refit():
+    # independent seed 48's twin: the base-driven rig of a Coulomb friction case, run without the friction,
+    # so a linear record. Its modal baseline keeps an overdamped pseudo-mode (5.5 Hz, damping ratio 1) and
+    # holds out at NRMSE 0.31, where the same fit on the case holds out at 0.05; a cubic between the tips,
+    # refitted with its own linear part, holds out at 0.047: a gain of 0.85 over the baseline, nearly all
+    # of it the refit's (0.045 over that linear part alone, above the 0.03 floor the rule asks). Testing
+    # the gain over the own linear part for significance too removed it (p = 0.14) but, over the 56 cases
+    # where the rule can act, lost two right answers (seed 51's hammer decay, whose cubic acts in its first
+    # six pieces; seed 60's contact): not kept
+    c = independent_case(48, twin=True)
+    assert c.cause == "none" and "twin of coulomb_friction" in c.info
+    d = discover(c.measurement)
+    assert d.findings == [], d.verdict()
