@@ -484,7 +484,7 @@ def test_a_chain_elements_coefficient_is_judged_against_the_element_not_a_one_ma
     per_mass = generated.truth["equivalent"]["k3_per_mass"]
     found = Candidate("cubic_stiffness", "a2-a3", {"coefficient_per_mass": 511 * per_mass},
                       physical={"coefficient_n_per_m3": 1.05 * k3, "modal_mass_kg": 2.6}, gain=0.8)
-    v = judge(c, SimpleNamespace(findings=[found], ambiguous=[[]]), 1.0)
+    v = judge(c, SimpleNamespace(findings=[found], ambiguous=[[]], baseline_test_nrmse=0.1), 1.0)
     assert v.right and v.extra == 0 and v.parameter_error == pytest.approx(0.05)
 
 

@@ -12,11 +12,12 @@ elements hold 40-80 % of its stiffness and start slipping at 5-30 % to 80-200 % 
 then runs the record with the effect and measures it.
 
 `discovery_case(seed, twin=True)` is the same case's *twin*: every draw the same (structure, drive,
-levels, instruments, the noise sequence), the record run without the effect (a friction joint stays
-stuck, the clamped-clamped beam has no membrane stretching). Its truth is cause "none", with the case
-it mirrors under `twin_of`. Twins show whether a method names causes where there are none on exactly
-the structures it is judged on, and how much of a case's error is the effect's at all: until its first
-contact, a stopper's case and its twin are the same record (tested).
+levels, instruments, the noise sequence, scaled to the same SNR of the twin's own signal), the record
+run without the effect (a friction joint stays stuck, the clamped-clamped beam has no membrane
+stretching). Its truth is cause "none", with the case it mirrors under `twin_of`. Twins show whether a
+method names causes where there are none on exactly the structures it is judged on, and how much of a
+case's error is the effect's at all. Tested: a case without an effect and its twin are the same record,
+bit for bit; a Duffing oscillator's twin has the linear oscillator's receptance, its case does not.
 
 The truth's `effect_strength` is RMS(f_nl) / RMS(k_static u) over the record, f_nl the element's force
 (for a joint: its departure from the stuck joint; for membrane stretching: its generalised force on mode
