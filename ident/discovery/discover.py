@@ -221,7 +221,8 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     if fit_data is not None:
         scored = _hold_at_fit_level(scored, baseline, prep_fit, warm, f_min, settings)
 
-    sel = _select(scored, baseline, prep, split, sc, settings, char)
+    sel = _select(findable(scored, fitted_here=rig is None and fit_data is None), baseline, prep, split, sc,
+                  settings, char)
     ext_model, ext_out, ext_err, ext_blocks = baseline.model, (), n0, e0
     if sel.findings:
         own = sel.findings[0].baseline or baseline
@@ -275,6 +276,18 @@ def _settle_by_backbone(first: Candidate, alike: list[Candidate], prep: Prepared
               f"with amplitude^{power:g} (a line {errs[power]:.2g} Hz off, against {other:.2g} Hz for the other "
               f"power): {', '.join(sorted(out))} set aside")
     return first, [c for c in keep if c is not first], reason
+
+
+def findable(scored: list[Candidate], fitted_here: bool) -> list[Candidate]:
+    """The candidates a finding may be: all of them, except a linear mismatch against a modal model
+    fitted to this very record (``fitted_here``). Such a model was fitted to these data by least squares;
+    a linear change that predicts them better is the fit's own imperfection, not a cause (independent
+    seed 32's twin, a linear record: a linear mismatch at tip 2, gain 0.05). The mismatch is still
+    scored and listed; against a rig model from a config, or a baseline fitted on another record
+    (``--fit-data``), the linear part can be wrong, and it can be a finding."""
+    if not fitted_here:
+        return scored
+    return [c for c in scored if c.cause != "linear_mismatch"]
 
 
 def _leaders(cands: list[Candidate], baseline: Baseline, by_loc: dict, prep: Prepared, split: Split, warm: int,
