@@ -17,9 +17,9 @@ import pytest
 from daq.sim.hidden import hidden_case
 from ident.cli.bench_discovery import Case, Verdict, judge, twin_report
 from ident.discovery import Channel, Measurement, discover
-from ident.discovery.discover import findable
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CUBIC, law_parameters
+from ident.discovery.discover import findable
 from ident.discovery.model import Element
 from ident.discovery.search import Candidate, Scoring, score
 from ident.discovery.signals import modal_band, prepare

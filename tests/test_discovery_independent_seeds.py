@@ -165,7 +165,6 @@ def test_a_drag_the_fitted_linear_part_had_absorbed_is_found_with_its_coefficien
     assert damping(f.baseline.model) == pytest.approx(eq["damping_ratio"], rel=0.3)
 
 
-
 @pytest.mark.xfail(strict=True, reason="a known false finding on a linear record (README, discovery: Twins)")
 def test_a_twin_without_its_effect_gets_no_finding_from_a_linear_refit():
     # independent seed 48's twin: the base-driven rig of a Coulomb friction case, run without the friction,

@@ -129,10 +129,9 @@ def judge(case: Case, d, seconds: float) -> Verdict:
                     for f in d.findings], float(d.baseline_test_nrmse))
 
 
-def run_case(args: tuple) -> Verdict:
-    """One case (a Dask task): (generator, seed, the rig generator's case length in s[, twin])."""
-    generator, seed, duration_s, *rest = args
-    twin = bool(rest and rest[0])
+def run_case(args: tuple[str, int, float, bool]) -> Verdict:
+    """One case (a Dask task): (generator, seed, the rig generator's case length in s, twin)."""
+    generator, seed, duration_s, twin = args
     case = rig_case(seed, duration_s) if generator == "rig" else independent_case(seed, twin=twin)
     t0 = time.perf_counter()
     try:
