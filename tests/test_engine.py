@@ -4,6 +4,8 @@ on small case sets; results in the order of the cases however the tasks finish."
 import re
 import time
 
+import numpy as np
+
 from clitools import run_main
 from ident.cli.engine import dask_client, mapper, run_ordered
 from ident.cli.main import main as ident_main
@@ -25,6 +27,7 @@ def test_bench_discovery_on_dask_prints_what_the_serial_run_prints(dask_schedule
     assert _without_times(dask) == _without_times(serial)
     assert [int(m) for m in re.findall(r"^case +(\d+)", serial, re.M)] == [2, 3]
     assert "confusion (rows true, columns named first), 2 cases:" in serial
+    assert serial.startswith(f"numpy {np.__version__}, scipy ")  # what the figures were computed with
     assert "sensor_gain         parameter error median" in serial  # case 3 names its cause: numbers compared too
 
 

@@ -18,11 +18,14 @@ finding.
 
 from __future__ import annotations
 
+import platform
 import time
 from collections import Counter
 from dataclasses import dataclass, field, replace
 
+import numba
 import numpy as np
+import scipy
 from daq.sim.hidden import hidden_case
 from daq.sim.independent.cases import discovery_case
 
@@ -254,6 +257,22 @@ def twin_report(verdicts: list[Verdict], gain_floor: float = Settings().gain_flo
     return "\n".join(lines)
 
 
+def environment() -> str:
+    """What the figures were computed with: the libraries whose round-off the fits follow and the processor
+    (its BLAS kernels). The search's answers can hang on round-off: independent seed 73 with two BLAS
+    threads; seed 3's twin, without a finding in stop 33's run and with a false quadratic stiffness (gain
+    0.27) in the next session's fresh install of the same deciding code (numpy 2.4.6, scipy 1.17.1, numba
+    0.68.1, AMD EPYC; the earlier run's versions and processor were not recorded, hence this line)."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    return (f"numpy {np.__version__}, scipy {scipy.__version__}, numba {numba.__version__}, "
+            f"Python {platform.python_version()}, {cpu}, one BLAS thread per case")
+
+
 def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: int | None = None,
                   scheduler: str | None = None, duration_s: float = RIG_CASE_S, twins: bool = False) -> int:
     """The benchmark: in this process, or on a local Dask cluster of ``workers`` processes, or on the
@@ -263,6 +282,7 @@ def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: in
     jobs = [(generator, s, duration_s, twin) for s in range(first_seed, first_seed + n_cases)
             for twin in ((False, True) if twins else (False,))]
     verdicts = []
+    print(environment(), flush=True)
     with session(scheduler, workers) as client:
         for v in ordered(client, run_case, jobs, "discovery"):
             verdicts.append(v)
