@@ -39,14 +39,18 @@ from .signals import ORDER, Prepared, convert
 from .split import Split
 
 
-MIN_RANK_PIECES = 5  # fewer pieces than this: the signed-rank test cannot reach p < 0.05, the t-test decides
+MIN_RANK_PIECES = 5  # fewer pieces than this: the signed-rank test's p hangs on the count alone, the t-test decides
 PENALTY = 1e9  # the refinement's objective where a simulation diverges or a parameter leaves its range
 NUDGE_RATE = 0.3  # relaxation rate of the warm-up towards measured velocities, per rad/s of the slowest mode
 
 
 @dataclass(frozen=True)
 class Settings:
-    alpha: float = 0.05  # significance of the paired tests
+    # significance of the paired tests. 0.1, not 0.05: on the independent generator's 100 cases and their
+    # 100 twins (the selection replayed exactly, stop 35) it names 66 right against 63 and the rig
+    # generator's 40 cases 36 against 35; no effect-free record (18 "none" cases, 100 twins, the rig's 4)
+    # gets a finding more. The gain floor and the tests between causes keep the twins clean, not alpha.
+    alpha: float = 0.1
     gain_floor: float = 0.03  # a finding must cut the held-out error by at least this share
     refine_evals: int = 60  # simulations per refinement
     refine_blocks: int = 6  # training blocks a refinement simulates (the busiest at the location)
@@ -209,8 +213,8 @@ def signed_rank_p(a: np.ndarray, b: np.ndarray) -> float:
     asks whether most pieces improve, which such outliers do not undo (Demsar 2006 recommends it over
     the paired t-test for comparing predictors across data sets for the same reason). With fewer than
     ``MIN_RANK_PIECES`` pieces the t-test decides: the rank test's smallest p there, 2^-n, is at least
-    1/16, above any usual alpha (a 3 s rig record, 4 pieces all better by a sensor gain: p = 0.0625
-    whatever the gain, the t-test 0.026)."""
+    1/16 and says only how many pieces improved (a 3 s rig record, 4 pieces all better by a sensor gain:
+    p = 0.0625 whatever the gain, the t-test 0.026)."""
     d = np.asarray(a, float) - np.asarray(b, float)
     if not np.all(np.isfinite(d)) or np.count_nonzero(d) < MIN_RANK_PIECES:
         return paired_p(a, b)  # also a diverged side, and no difference at all (p = 1)
