@@ -24,9 +24,9 @@ def test_bench_discovery_on_dask_prints_what_the_serial_run_prints(dask_schedule
     argv = ["bench", "discovery", "--generator", "rig", "--cases", "2", "--seed", "10", "--duration", "3"]
     code, serial, err, tb = run_main(ident_main, argv)
     assert code == 0 and tb is None, err
-    code, dask, err, tb = run_main(ident_main, [*argv, "--scheduler", dask_scheduler])
+    code, on_dask, err, tb = run_main(ident_main, [*argv, "--scheduler", dask_scheduler])
     assert code == 0 and tb is None, err
-    assert _without_times(dask) == _without_times(serial)
+    assert _without_times(on_dask) == _without_times(serial)
     assert [int(m) for m in re.findall(r"^case +(\d+)", serial, re.M)] == [10, 11]
     assert "confusion (rows true, columns named first), 2 cases:" in serial
     assert serial.startswith(f"numpy {np.__version__}, scipy ")  # what the figures were computed with
@@ -40,8 +40,8 @@ def test_duffing_noise_sweep_on_dask_equals_the_serial_sweep(dask_scheduler):
     args = (data, (0.25,), 2, ("paper", "realistic"), 7)
     serial = noise_sweeps(*args, mapper=mapper(None))
     with dask_client(dask_scheduler, None) as client:
-        dask = noise_sweeps(*args, mapper=mapper(client, "duffing"))
-    assert dask == serial  # every float equal
+        on_dask = noise_sweeps(*args, mapper=mapper(client, "duffing"))
+    assert on_dask == serial  # every float equal
     assert [len(serial[p][0]["error_percent"]) for p in ("paper", "realistic")] == [2, 2]
     # the same draws as noise_sweep's serial loop: repetition r of level i from default_rng([seed, i, r])
     assert serial["paper"][0]["error_percent"][0] != serial["paper"][0]["error_percent"][1]
