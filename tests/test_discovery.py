@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from daq.sim.hidden import hidden_case
-from ident.cli.bench_discovery import Case, Verdict, judge, twin_report
+from ident.cli.bench_discovery import Case, Verdict, by_strength, judge, report, twin_report
 from ident.discovery import Channel, Measurement, discover
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CUBIC, law_parameters
@@ -136,6 +136,23 @@ def test_the_twin_report_counts_findings_on_twins_and_each_effects_share_of_the_
     assert "contact             median   0.95; below the floor 0/1 (named right 0), above 1 (named right 1)" in text
     assert "quadratic_damping   median   0.01; below the floor 1/1 (named right 0), above 0 (named right 0)" in text
     assert lines[-1].endswith(": 1/1")
+
+
+def test_the_report_counts_right_answers_per_class_of_effect_strength():
+    """Three contacts (strengths 0.05, 0.5 and 2.0: one per class, the strong one missed), a cubic of
+    strength 0.2 named right, and a case without an effect, which has no strength and is left out."""
+    def v(cause, named, right, strength):
+        return Verdict(1, "rig_base", cause, named, "tip1" if named != "nothing" else "", right, 0, None, None,
+                       1.0, strength=strength)
+    verdicts = [v("contact", "contact", True, 0.05), v("contact", "contact", True, 0.5),
+                v("contact", "nothing", False, 2.0), v("cubic_stiffness", "cubic_stiffness", True, 0.2),
+                v("none", "nothing", True, None)]
+    lines = by_strength(verdicts)
+    assert lines[1].split() == ["<", "0.1", "0.1-0.3", "0.3-1", ">=", "1"]
+    assert lines[2].split() == ["contact", "1/1", "-", "1/1", "0/1"]
+    assert lines[3].split() == ["cubic_stiffness", "-", "1/1", "-", "-"]
+    assert len(lines) == 4 and "\n".join(lines) in report(verdicts, 1.0)
+    assert by_strength([v("contact", "contact", True, None)]) == []  # the rig generator's cases carry none
 
 
 def test_a_clipping_found_where_the_generator_clipped_is_not_a_false_finding():
