@@ -71,6 +71,9 @@ class Cause:
     # a refit of a fitted linear part with the cause in place also starts from these strengths: shares of
     # the location's mode's stiffness (omega^2) or damping (2 zeta omega), as ``equivalent_coefficient``
     starts: tuple[float, ...] = ()
+    # the parameters are read off the whole record (a sensor's full scale: its extreme), not fitted on the
+    # training blocks, so every block may test the cause (``search.score``), not the held-out ones alone
+    read_off_record: bool = False
 
     @property
     def order(self) -> int:
@@ -110,7 +113,7 @@ CAUSES: dict[str, Cause] = {c.name: c for c in (
     Cause("sensor_offset", NONE, (Parameter("offset", "unit of the response", "constant added"),),
           positive=False, kind="sensor", separates_by="a record at rest"),
     Cause("clipping", NONE, (Parameter("range", "unit of the response", "the sensor's full scale"),),
-          kind="sensor", separates_by="a lower level"),
+          kind="sensor", separates_by="a lower level", read_off_record=True),
 )}
 MECHANICAL = tuple(n for n, c in CAUSES.items() if c.kind == "mechanical")
 SENSOR = tuple(n for n, c in CAUSES.items() if c.kind == "sensor")

@@ -249,10 +249,10 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
             alone = np.inf
         own_gain = 1.0 - nrmse / alone if np.isfinite(alone) and alone > 0 else 1.0
     p_value = signed_rank_p(sc.block_errors, errs)
-    if c.cause == "clipping" and np.isfinite(nrmse):
-        # a clipping's range is the record's extreme, read off the data and fitted on no block, so every
-        # block tests it, the training blocks too: held out alone, a sweep's few clipped pieces could not
-        # make a clipping significant (the rig generator's seed 20: 515 of its 668 clipped samples in
+    if CAUSES[c.cause].read_off_record and np.isfinite(nrmse):
+        # a cause whose parameters are read off the record (a clipping's range: its extreme) is fitted on
+        # no block, so every block tests it, the training blocks too: held out alone, a sweep's few clipped
+        # pieces could not make a clipping significant (the rig generator's seed 20: 515 of its 668 clipped samples in
         # training blocks; gain 0.05 on the held-out ones, p = 0.16). Its gain and the comparisons with
         # other causes stay on the held-out pieces.
         try:
