@@ -21,8 +21,8 @@ from ident.discovery.catalogue import (CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, eq
                                       law_parameters)
 from ident.discovery.baselines import Location
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
-from ident.discovery.search import (Candidate, clustered_p, one_sign, paired_p, pieces_per_block, predict,
-                                    signed_rank_p)
+from ident.discovery.search import (Candidate, Settings, choose, clustered_p, one_sign, paired_p, pieces_per_block,
+                                    predict, signed_rank_p)
 from ident.discovery.signals import convert, frf, impulsive, miso_frf, prepare
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
@@ -351,6 +351,28 @@ def test_a_second_finding_is_tested_over_blocks_not_over_their_correlated_pieces
                                                       rel=1e-9)
     # a diverged side: never a gain
     assert clustered_p(a, np.where(np.arange(40) == 7, np.inf, b), counts) == 1.0
+
+
+def _scored(cause, errors, baseline_nrmse=0.1):
+    nrmse = float(np.mean(errors))
+    return Candidate(cause, "tip1", {}, block_errors=errors, test_nrmse=nrmse, gain=1 - nrmse / baseline_nrmse,
+                     p_value=1e-6)
+
+
+@pytest.mark.parametrize("margin,named", [(0.01, "sensor_gain"), (0.10, "linear_mismatch")])
+def test_a_simpler_cause_gives_way_only_to_a_material_gain(margin, named):
+    # a linear mismatch (two numbers) that predicts every one of 200 pieces ``margin`` better than a sensor
+    # gain (one): 1 % is significant (p ~ 0) and immaterial against the 3 % floor, so the gain stays the
+    # finding and the mismatch its look-alike; 10 % sets the gain aside
+    rng = np.random.default_rng(5)
+    simple = rng.uniform(0.03, 0.04, 200)
+    complex_ = simple * (1 - margin) * (1 + rng.normal(0, 1e-4, 200))
+    gain, mismatch = _scored("sensor_gain", simple), _scored("linear_mismatch", complex_)
+    settings = Settings()
+    assert paired_p(simple, complex_) < 1e-10 and settings.gain_floor == 0.03
+    first, alike, _ = choose([mismatch, gain], settings)
+    assert first.cause == named
+    assert [c.cause for c in alike] == (["linear_mismatch"] if named == "sensor_gain" else [])
 
 
 def test_the_test_against_the_baseline_is_the_exact_signed_rank_test_and_holds_a_heavy_tail():
