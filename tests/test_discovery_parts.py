@@ -1,5 +1,6 @@
 """The parts of ident.discovery against analytic or independently computed values."""
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -20,6 +21,7 @@ from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import (CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, equivalent_coefficient, force_series,
                                       law_parameters)
 from ident.discovery.baselines import Location
+from ident.discovery.result import Discovery
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
 from ident.discovery.search import (Candidate, Settings, choose, clustered_p, one_sign, paired_p, pieces_per_block,
                                     predict, signed_rank_p)
@@ -373,6 +375,23 @@ def test_a_simpler_cause_gives_way_only_to_a_material_gain(margin, named):
     first, alike, _ = choose([mismatch, gain], settings)
     assert first.cause == named
     assert [c.cause for c in alike] == (["linear_mismatch"] if named == "sensor_gain" else [])
+
+
+def test_one_cause_at_another_place_is_a_look_alike_and_between_the_same_sensors_is_not():
+    # independent seed 17's shape: a contact between a1 and a2 first, the same contact at a1 (to the
+    # ground) within the noise of it, and its twin between the same sensors with the other sign convention
+    rng = np.random.default_rng(11)
+    e = rng.uniform(0.18, 0.22, 40)
+    first = replace(_scored("contact", e * 0.79, 0.2), location="a1-a2")
+    elsewhere = replace(_scored("contact", e * 0.79 * (1.002 + 0.05 * (-1.0) ** np.arange(40)), 0.2), location="a1")
+    same = replace(_scored("contact", e * 0.79 * (1.002 - 0.05 * (-1.0) ** np.arange(40)), 0.2), location="a2+a1")
+    beaten = replace(_scored("contact", e * 0.95, 0.2), location="a2-a3")
+    best, alike, _ = choose([first, elsewhere, same, beaten], Settings())
+    assert best is first
+    assert [c.location for c in alike] == ["a1"]
+    d = Discovery(*[None] * 7, findings=[best], ambiguous=[alike], candidates=[], split=None, prep=None, warm=0)
+    assert d.verdict() == ("ambiguous: contact at a1-a2 or contact at a1 (the same cause at two places: a response "
+                           "on each side of the suspected element, or the excitation moved)")
 
 
 def test_the_test_against_the_baseline_is_the_exact_signed_rank_test_and_holds_a_heavy_tail():

@@ -14,6 +14,9 @@ from .search import Candidate
 from .signals import Prepared
 from .split import Split
 
+# the test that separates one cause at two places
+PLACE = "the same cause at two places: a response on each side of the suspected element, or the excitation moved"
+
 
 @dataclass(frozen=True)
 class Discovery:
@@ -54,7 +57,8 @@ class Discovery:
         for f, alike in zip(self.findings, self.ambiguous):
             if alike:
                 names = " or ".join([f.label] + [a.label for a in alike[:2]])
-                parts.append(f"ambiguous: {names} ({CAUSES[f.cause].separates_by})")
+                how = (PLACE if all(a.cause == f.cause for a in alike) else CAUSES[f.cause].separates_by)
+                parts.append(f"ambiguous: {names} ({how})")
             else:
                 parts.append(f"found {f.label} (held-out gain {f.gain:.2f}, p = {f.p_value:.1g})")
         return "; ".join(parts)

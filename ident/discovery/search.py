@@ -694,12 +694,16 @@ def choose(cands: list[Candidate], settings: Settings) -> tuple[Candidate | None
         if not simpler:
             break
         best = max(simpler, key=lambda c: c.gain)
-    # a look-alike of the same cause at an overlapping location says the same thing
+    # a look-alike of the same cause between the same sensors (their difference or their sum, whichever
+    # way the signs fell) says the same thing; at another place it is another answer: a stopper between
+    # masses 1 and 2 is not one from mass 1 to the ground (independent seed 17, a chain: a contact named
+    # between a1 and a2 alone, where one at a1 predicted as well)
     alike = [c for c in sig if c is not best and not beats(best, c, settings)
-             and not (c.cause == best.cause and _overlap(c.location, best.location))]
+             and not (c.cause == best.cause and same_sensors(c.location, best.location))]
     return best, alike, ""
 
 
-def _overlap(a: str, b: str) -> bool:
-    split = lambda s: set(s.replace("+", "-").split("-"))  # noqa: E731
-    return bool(split(a) & split(b))
+def same_sensors(a: str, b: str) -> bool:
+    """Do two locations name the same sensors ("a2-a3", "a3+a2")?"""
+    split = lambda s: frozenset(s.replace("+", "-").split("-"))  # noqa: E731
+    return split(a) == split(b)
