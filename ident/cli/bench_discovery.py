@@ -30,7 +30,7 @@ from daq.sim.hidden import hidden_case
 from daq.sim.independent.cases import discovery_case
 
 from ..discovery import Channel, Measurement, discover
-from ..discovery.search import Settings
+from ..discovery.search import Settings, same_sensors
 from ..rig import RigParams
 from .engine import ordered, session
 
@@ -98,11 +98,6 @@ def rig_case(seed: int, duration_s: float = RIG_CASE_S) -> Case:
     return Case(seed, f"rig ({c.excitation})", m, c.nominal, c.effect, f"tip{c.beam}", dict(c.truth))
 
 
-def _same_location(found: str, truth: str) -> bool:
-    parts = lambda s: frozenset(s.replace("+", "-").split("-"))  # noqa: E731
-    return parts(found) == parts(truth)
-
-
 def judge(case: Case, d, seconds: float) -> Verdict:
     """The first finding against the true cause and location, and the findings that are not the truth. A
     clipping found at a response the generator's instrument clipped is the truth too: neither the cause
@@ -117,9 +112,9 @@ def judge(case: Case, d, seconds: float) -> Verdict:
         named, loc, right = "ambiguous", findings[0].location, False
     else:
         named, loc = findings[0].cause, findings[0].location
-        right = cause != "none" and named == cause and _same_location(loc, case.location)
+        right = cause != "none" and named == cause and same_sensors(loc, case.location)
     # every finding that is not the true cause at the true location is a false extra one
-    extra = len(findings) - int(cause != "none" and any(f.cause == cause and _same_location(f.location, case.location)
+    extra = len(findings) - int(cause != "none" and any(f.cause == cause and same_sensors(f.location, case.location)
                                                         for f in findings))
     perr = gain = None
     if right and cause in COMPARED:
