@@ -436,3 +436,18 @@ def test_the_halves_phasors_are_numpys_bit_for_bit(n_windows, n):
     got = _half_phasors(xs, basis, np.hanning(m))
     for h in (0, 1):
         np.testing.assert_array_equal(got[h].view(float), want[h].view(float))
+
+
+def test_a_free_beam_beside_a_hitting_one_is_free_where_the_harmonics_reach_the_second_modes():
+    """Independent regime seed 3022 (coupling 7.9 %, beam 2 on a stiff one-sided stopper, beam 1 free), the
+    drive at 7.6 Hz: its tenth harmonic sits on the beams' second modes (74 and 76 Hz), which are alike and
+    carry 10 % of beam 2's power in [1.5 f, 10.5 f] into beam 1; counted as harmonics, beyond the 5 % the
+    coupling may carry there, it called beam 1 hitting in every window. From the fifth harmonic on the
+    bands belong to the higher modes (see the module's docstring): beam 1 is free throughout."""
+    from daq.sim.independent.regimes import steady_case
+
+    case = steady_case(3022, "beam2", minutes=0.5, fs_hz=1000)
+    assert case.truth["regime_share"]["beam2"] == 1.0
+    sc, windows = scored(case)
+    assert sc.reported_changes == 0 and sc.share_right == 1.0
+    assert all(w.label == "localized-2" for w in windows)

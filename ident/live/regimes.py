@@ -7,9 +7,18 @@ one rig to another (stoppers soft or rigid, one- or two-sided, 500 Hz to 5 kHz, 
 level). Per window (``window_s``, every ``hop_s``), with f the drive frequency (the base's
 spectral peak) and a Hann-windowed spectrum of every channel:
 
-- **distortion**: the power of the tip's acceleration in [1.5 f, 10.5 f] (the harmonics) and in
-  [10.5 f, 0.3 fs] (impact ringing, reported apart as ``impact_ratio`` and ``impact_rms``), each
-  above the channel's noise floor, over the power at the fundamental. The floor of white sensor
+- **distortion**: the power of the tip's acceleration in [1.5 f, 5.5 f] (the low harmonics) and in
+  [5.5 f, 0.3 fs] (the beams' higher modes: high harmonics and impact ringing, reported apart as
+  ``impact_ratio`` and ``impact_rms``), each above the channel's noise floor, over the power at the
+  fundamental. The edge between them is the second mode's lowest place: a cantilever's second mode
+  lies at 6.27 times its first (the Euler-Bernoulli ratio (4.694 / 1.875)^2; a tip mass raises it,
+  to 8.5-16 on the generator's rigs) and a beam hits near resonance, the drive at most about 15 %
+  above its first mode, so the harmonics up to the fifth lie between the first and second modes,
+  where the coupling carries little, and those above may sit on the second modes, which are alike
+  between the beams and carry much of the other beam's motion (independent regime seed 3022: the
+  drive at 7.6 Hz, its tenth harmonic on the second modes at 74 and 76 Hz; a free beam showed 10 % of
+  the hitting beam's power in [1.5 f, 10.5 f], the edge before, twice the share the coupling may
+  carry there, and was called hitting in every window). The floor of white sensor
   noise is a low quantile of the bands' bins, the lower of this window's and the 10th percentile
   of the last 400 windows' (the noise is stationary; a window full of impacts raises its own).
   Removed: what the base's own harmonics would put into the tip, and the share of the other
@@ -98,6 +107,7 @@ LEARNED_CAP = 1.5  # largest log-odds a learned gap may give
 ABOVE_HIT_CAP = 1.0  # ... an amplitude above those seen hitting, before any free one was learned
 LEARN_WINDOWS = 400  # confident windows kept per beam for the learned gap and stiffness (100 s at 0.25 s)
 FLOOR_QUANTILE = 0.2
+HARMONIC_TOP = 5.5  # the harmonic band's top edge over the drive frequency: below the second modes (module docstring)
 # the coupling's share learned per stream (see _cross_talk): rows kept where the other beam distorts at least
 # CROSS_STRONG times its band's noise and 10 x distortion_on; used from CROSS_MIN_WINDOWS rows within CROSS_BAND
 # (log drive frequency) of the window's drive, their CROSS_QUANTILE times CROSS_MARGIN (harmonic, impact band)
@@ -177,7 +187,7 @@ class BeamState:
     gap_m: float  # from the config, or learned (nan until learned)
     distortion: float  # harmonic-band power over the fundamental's, floor and base removed
     odd_distortion: float  # the part at 3 f and 5 f
-    impact_ratio: float  # the part above 10.5 f (impact ringing)
+    impact_ratio: float  # the part above 5.5 f (the higher modes: high harmonics, impact ringing)
     significant: bool  # the excess stands out of the noise floor
     natural_frequency_hz: float  # harmonic-balance (equivalent linear) natural frequency
     free_frequency_hz: float  # learned from windows judged free (nan until learned)
@@ -362,9 +372,9 @@ class _Spectral:
     phasors: np.ndarray  # (3,) complex amplitudes at f
     harmonics: np.ndarray  # (H, 3) complex amplitudes at n f, n = 1 .. H (H = PEAK_HARMONICS, below 0.45 fs)
     fundamental: np.ndarray  # (3,) power in [0.5 f, 1.5 f]
-    harmonic: np.ndarray  # (3,) power in [1.5 f, 10.5 f] (distortion)
+    harmonic: np.ndarray  # (3,) power in [1.5 f, HARMONIC_TOP f] (distortion)
     odd: np.ndarray  # (3,) power within f / 4 of 3 f and 5 f
-    impact: np.ndarray  # (3,) power in [10.5 f, 0.3 fs] (impact ringing)
+    impact: np.ndarray  # (3,) power in [HARMONIC_TOP f, 0.3 fs] (the higher modes: high harmonics, impact ringing)
     bins: tuple[int, int, int]  # bins in the harmonic band, at the odd harmonics, in the impact band
     floor: np.ndarray  # (3,) this window's floor per bin (a low quantile of both bands)
     power_scale: float  # one-sided power in (m/s^2)^2 per unit of summed bins
@@ -427,7 +437,7 @@ def spectral_batch(xs: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) 
     basis[:, 0] = np.exp(-2j * np.pi * f[:, None] * t)
     for h in range(1, basis.shape[1]):
         np.multiply(basis[:, h - 1], basis[:, 0], out=basis[:, h])
-    fund, harm, imp, odd, low, bins = _bands(p, f, df, top, FLOOR_QUANTILE)
+    fund, harm, imp, odd, low, bins = _bands(p, f, df, top, HARMONIC_TOP, FLOOR_QUANTILE)
     floor = low / _FLOOR_NORM  # (zero where the bands are empty)
     scale = 2.0 / (n * w2 * pad)
     # white noise of variance s2 puts s2 sum(w^2) into each bin and 4 s2 sum(w^2) / sum(w)^2 into a phasor
@@ -530,9 +540,9 @@ def _first_bin(freq_hz, df, n_bins):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _bands(p, f, df, top, quantile):  # pragma: no cover - compiled
+def _bands(p, f, df, top, split, quantile):  # pragma: no cover - compiled
     """The band powers of ``_Spectral`` per window q and row of p (W, c, bins; bins df apart), f[q] the
-    window's drive frequency: sums over [0.5 f, 1.5 f), [1.5 f, 10.5 f), [10.5 f, top) and within f / 4 of
+    window's drive frequency: sums over [0.5 f, 1.5 f), [1.5 f, split f), [split f, top) and within f / 4 of
     3 f and 5 f (each added bin by bin from its first, as numpy's sum along the rows' axis); the
     ``quantile`` (lower order statistic) of the bins in [1.5 f, top) (exact whatever the selection
     algorithm; zero if there are none); the bins in the harmonic band, at the odd harmonics and in the
@@ -544,7 +554,7 @@ def _bands(p, f, df, top, quantile):  # pragma: no cover - compiled
     for q in range(n_w):
         fq = f[q]
         i_f, i_h = _first_bin(0.5 * fq, df, nb), _first_bin(1.5 * fq, df, nb)
-        i_i, i_top = _first_bin(min(10.5 * fq, top), df, nb), _first_bin(top, df, nb)
+        i_i, i_top = _first_bin(min(split * fq, top), df, nb), _first_bin(top, df, nb)
         i_i = max(i_h, i_i)
         n_odd = 0
         for m in (3, 5):
