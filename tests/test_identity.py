@@ -84,7 +84,9 @@ def test_duplicate_frames_are_counted_and_stored_once(tmp_path):
     assert np.all(np.diff(seq) == 1) and len(seq) == 6000  # each sample once, nothing counted as lost
     status = [d for _, d in messages(out, "/rig/status")][-1]
     assert 30 < status["duplicates"] < 100 and status["dropped_frames"] == 0  # 1 % of 6,000
-    assert 0 <= status["frames"] - status["duplicates"] - 6000 <= 50  # frames past --duration are read, not kept
+    # frames past --duration are read, not kept: as many as the device sends while the reader stops, which on a
+    # loaded machine took longer than 25 ms (54 frames at 2 kHz in one CI run); 0.2 s bounds it
+    assert 0 <= status["frames"] - status["duplicates"] - 6000 <= 400
 
 
 @pytest.mark.parametrize("via", ["symlink", "stale pts path"])
