@@ -21,6 +21,7 @@ file: daq.safeio): generating takes most of the time.
 
 from __future__ import annotations
 
+import argparse
 import json
 import time
 from dataclasses import dataclass
@@ -54,6 +55,25 @@ def add_arguments(p) -> None:
     g.add_argument("--cache", type=Path, help="--regimes: folder to keep the generated cases in")
     g.add_argument("--config-gaps", action="store_true",
                    help="--regimes: also run with the stopper gaps given, as a config would")
+    g.add_argument("--first-hz", metavar="LO,HI", type=_first_range, default=FIRST_RANGE_HZ,
+                   help="--regimes: the range beam 1's first mode is drawn from (default 8,15 Hz; "
+                        "3.5,6 for slow rigs)")
+    g.add_argument("--regime-window", type=number(0.25, 60.0, unit="s"), default=RegimeConfig.window_s,
+                   help=f"--regimes: the monitor's window (default {RegimeConfig.window_s:g} s)")
+
+
+FIRST_RANGE_HZ = (8.0, 15.0)  # the generator's default draw of beam 1's first mode
+
+
+def _first_range(text: str) -> tuple[float, float]:
+    """argparse type of --first-hz LO,HI."""
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"takes two frequencies in Hz, as 3.5,6; got {text!r}") from None
+    if not 0.5 <= lo < hi <= 100.0:
+        raise argparse.ArgumentTypeError(f"takes 0.5 <= LO < HI <= 100 Hz; got {text!r}")
+    return lo, hi
 
 
 @dataclass
@@ -64,20 +84,22 @@ class CaseData:
     truth: dict
 
 
-def _generate(kind: str, seed: int, regime: str | None, minutes: float, fs_hz: int | None) -> CaseData:
+def _generate(kind: str, seed: int, regime: str | None, minutes: float, fs_hz: int | None,
+              first: tuple[float, float]) -> CaseData:
     if kind == "regimes":
-        case = regime_case(seed, fs_hz=fs_hz)
+        case = regime_case(seed, fs_hz=fs_hz, first_range_hz=first)
     else:
-        case = steady_case(seed, regime, minutes=minutes, fs_hz=int(fs_hz))
+        case = steady_case(seed, regime, minutes=minutes, fs_hz=int(fs_hz), first_range_hz=first)
     x = np.column_stack([case.columns[k] for k in ("base", "tip1", "tip2")])
     return CaseData(case.fs_hz, x, np.asarray(case.truth_series["achieved"], int), case.truth)
 
 
 def load_case(kind: str, seed: int, regime: str | None = None, minutes: float = 10.0, fs_hz: int | None = None,
-              cache: Path | None = None) -> CaseData:
+              cache: Path | None = None, first: tuple[float, float] = FIRST_RANGE_HZ) -> CaseData:
     """A generated case, from the cache folder when it holds it (one npz: the arrays and the truth as JSON
     text). A new case is written beside its name and renamed when complete, never over a file."""
     name = f"{kind}_{seed}" + (f"_{regime}_{minutes:g}min_{fs_hz}Hz" if kind == "steady" else "")
+    name += f"_first{first[0]:g}-{first[1]:g}Hz" if tuple(first) != FIRST_RANGE_HZ else ""
     if cache is not None:
         path = cache / f"{name}.npz"
         if path.is_file():
@@ -86,7 +108,7 @@ def load_case(kind: str, seed: int, regime: str | None = None, minutes: float = 
                     return CaseData(float(z["fs_hz"]), z["x"], z["achieved"], json.loads(str(z["truth"])))
             except (OSError, ValueError, KeyError) as exc:
                 raise ValueError(f"--cache: {path} is not a case this benchmark wrote ({exc}); remove it") from None
-    data = _generate(kind, seed, regime, minutes, fs_hz)
+    data = _generate(kind, seed, regime, minutes, fs_hz, first)
     if cache is not None:
         with safe_output(path, label="--cache") as tmp, open(tmp, "wb") as fh:
             np.savez_compressed(fh, fs_hz=data.fs_hz, x=data.x, achieved=data.achieved,
@@ -94,9 +116,9 @@ def load_case(kind: str, seed: int, regime: str | None = None, minutes: float = 
     return data
 
 
-def run_monitor(data: CaseData, gaps: tuple[float, float] | None = None):
+def run_monitor(data: CaseData, gaps: tuple[float, float] | None = None, window_s: float = RegimeConfig.window_s):
     """Windows and changes of the monitor on the case's three columns, fed in serial-read-sized blocks."""
-    state = regime_start(RegimeConfig(fs_hz=data.fs_hz, gap_m=gaps))
+    state = regime_start(RegimeConfig(fs_hz=data.fs_hz, gap_m=gaps, window_s=window_s))
     step = max(1, int(round(BLOCK_S * data.fs_hz)))
     windows, changes = [], []
     for k in range(0, len(data.x), step):
@@ -171,16 +193,19 @@ def run(args) -> int:
     names = list(REGIMES)
     rows = []
     print(f"regime monitor on the independent generator: seeds {args.seed}..{args.seed + args.cases - 1}, "
-          f"{args.minutes:g} steady minutes each" + (f", cases kept in {args.cache}" if args.cache else ""),
+          f"{args.minutes:g} steady minutes each, beam 1's first mode drawn in "
+          f"{args.first_hz[0]:g}-{args.first_hz[1]:g} Hz, "
+          f"windows of {args.regime_window:g} s" + (f", cases kept in {args.cache}" if args.cache else ""),
           flush=True)
     head = (" seed |   fs | stopper k/k_beam  side | mist | coup |  SNR | windows right | changes <= 1 s (max) "
             "| false | steady regime false")
     print(head)
     for seed in range(args.seed, args.seed + args.cases):
         t0 = time.perf_counter()
-        reg = load_case("regimes", seed, cache=args.cache)
+        reg = load_case("regimes", seed, cache=args.cache, first=args.first_hz)
         regime = names[seed % 4]
-        steady = load_case("steady", seed, regime, args.minutes, int(reg.fs_hz), cache=args.cache)
+        steady = load_case("steady", seed, regime, args.minutes, int(reg.fs_hz), cache=args.cache,
+                           first=args.first_hz)
         t_gen = time.perf_counter() - t0
         info = describe(reg.truth, reg.fs_hz)
         row = dict(seed=seed, **info, steady_regime=regime)
@@ -189,8 +214,8 @@ def run(args) -> int:
             variants.append(("gap_", tuple(float(s["gap_eq_m"]) for s in reg.truth["stoppers"])))
         for key, gaps in variants:
             t1 = time.perf_counter()
-            sc = score_case(reg, *run_monitor(reg, gaps))
-            sw, sch = run_monitor(steady, gaps)
+            sc = score_case(reg, *run_monitor(reg, gaps, args.regime_window))
+            sw, sch = run_monitor(steady, gaps, args.regime_window)
             ss = score_case(steady, sw, sch)
             row |= {f"{key}windows": sc.windows, f"{key}right": sc.windows_right,
                     f"{key}changes": len(sc.true_changes), f"{key}in_time": sc.changes_in_time,

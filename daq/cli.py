@@ -22,7 +22,7 @@ import numpy as np
 from ident.cli import DURATION, SEED, WINDOW, OneLineParser, number, run_guarded
 from ident.live.pipeline import (Pipeline, PipelineConfig, kernels_cached, model_records, parse_gaps,
                                  rolling_config, warm_up)
-from ident.live.regimes import RegimeConfig
+from ident.live.regimes import MIN_PERIODS, RegimeConfig
 
 from . import bench, calibrate
 from .config import Config, load_config
@@ -102,6 +102,9 @@ def add_live_options(p, beside: str) -> None:
     p.add_argument("--hop", type=WINDOW, default=1.0, help="rolling SINDy hop [s] (default 1)")
     p.add_argument("--gaps", metavar="G1,G2", type=_gaps, help="the tips' stopper gaps [m] for the regime monitor "
                    "(default: learned from the data)")
+    p.add_argument("--regime-window", type=WINDOW, default=RegimeConfig.window_s,
+                   help=f"the regime monitor's window [s] (default {RegimeConfig.window_s:g}); it must hold "
+                        f"{MIN_PERIODS:g} periods of the drive: 1.5 s for a rig driven at 2 Hz")
 
 
 def _gaps(text: str) -> tuple[float, float]:
@@ -115,6 +118,9 @@ def _gaps(text: str) -> tuple[float, float]:
 def check_live(args) -> None:
     if args.hop > args.window:
         raise ValueError(f"--hop {args.hop:g} s is longer than --window {args.window:g} s")
+    if args.regime_window < RegimeConfig.hop_s:
+        raise ValueError(f"--regime-window {args.regime_window:g} s is shorter than the regime monitor's "
+                         f"{RegimeConfig.hop_s:g} s hop")
 
 
 def sim(args) -> int:
@@ -174,6 +180,7 @@ def record(args) -> int:
         # and its events go to the recording (and to --events)
         live = LiveProcessing(cfg.daq.rate_hz, mode, rrd, args.events, args.window, args.hop, args.bind,
                               force=args.force, inputs=inputs, identify=not args.no_identify, gaps=args.gaps,
+                              regime_window_s=args.regime_window,
                               compile_s=compile_s)
         try:
             rec = McapRecorder(out, cfg, port=port, force=args.force, inputs=inputs, accel_json=args.accel_json)
@@ -253,11 +260,13 @@ class LiveProcessing:
     def __init__(self, fs_hz: float, viewer_mode: str, rrd_path: Path | None, events_path: Path | None,
                  window_s: float = 4.0, hop_s: float = 1.0, bind: str = DEFAULT_BIND, *, force: bool = False,
                  inputs=(), identify: bool = True, gaps: tuple[float, float] | None = None,
+                 regime_window_s: float = RegimeConfig.window_s,
                  compile_s: float = 0.0):
         self.identify = identify  # False: filters and the regime monitor only (no rolling SINDy)
         self.pipe = Pipeline(PipelineConfig(fs_hz=fs_hz, identify=identify,
                                             rolling=rolling_config(fs_hz, window_s, hop_s),
-                                            regime=RegimeConfig(fs_hz=fs_hz, gap_m=gaps)))
+                                            regime=RegimeConfig(fs_hz=fs_hz, gap_m=gaps,
+                                                                window_s=regime_window_s)))
         self.compile_s = compile_s  # how long the caller compiled the kernels before the first sample
         self.fs_hz = fs_hz
         self.jsonl = JsonlEvents(events_path, force=force, inputs=inputs) if events_path else None
@@ -334,11 +343,12 @@ class LiveProcessing:
             if e["kind"] == "regime":
                 self.regimes.append(e["regime"])
             msg = (f"regime {e['regime']} (was {e['previous']})" if e["kind"] == "regime"
+                   else e["message"] if e["kind"] == "regime_note"
                    else f"starting regime {e['regime']} (confidence {e['confidence']:.2f})"
                    if e["kind"] == "regime_start"
                    else f"beam {e.get('beam')} model changed: " + "; ".join(e.get("equations", [])))
             data = {k: v for k, v in e.items() if k not in ("t", "kind")}
-            self.outq.put(Event(e["t"], e["kind"], msg, "info", data))
+            self.outq.put(Event(e["t"], e["kind"], msg, "warning" if e["kind"] == "regime_note" else "info", data))
         return out
 
     def write_to(self, rec) -> None:

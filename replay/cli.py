@@ -156,13 +156,15 @@ def play_cmd(args) -> int:
             if e["kind"] in ("regime_start", "regime"):
                 start = " (start)" if e["kind"] == "regime_start" else ""
                 print(f"{e['t']:9.2f} s  regime {e['regime']}{start}", flush=True)
+            elif e["kind"] == "regime_note":
+                print(f"{e['t']:9.2f} s  note: {e['message']}", flush=True)
 
     try:
         compile_s = compile_kernels(identify=not args.no_identify)  # before the clock starts: no window waits
         cpu0 = time.process_time()
         rep = play(samples, rate=None if args.max else args.rate, start_s=args.start, duration_s=args.duration,
                    loop=args.loop, identify=not args.no_identify, on_step=on_step, stop=lambda: stopped[0],
-                   window_s=args.window, hop_s=args.hop, gaps=args.gaps)
+                   window_s=args.window, hop_s=args.hop, gaps=args.gaps, regime_window_s=args.regime_window)
     finally:
         viewer.close()
         if events:

@@ -31,12 +31,13 @@ class PlayReport:
 def play(samples: Samples, *, rate: float | None = 1.0, start_s: float = 0.0, duration_s: float | None = None,
          loop: bool = False, identify: bool = True, on_step: Callable[[StepOutput], None] | None = None,
          stop: Callable[[], bool] | None = None, max_loops: int | None = None, window_s: float = 4.0,
-         hop_s: float = 1.0, gaps: tuple[float, float] | None = None) -> PlayReport:
+         hop_s: float = 1.0, gaps: tuple[float, float] | None = None,
+         regime_window_s: float = RegimeConfig.window_s) -> PlayReport:
     if rate is not None and not 0 < rate <= 1e6:
         raise ValueError(f"--rate must be a positive, finite speed, got {rate}")
     pipe = Pipeline(PipelineConfig(fs_hz=samples.fs_hz, identify=identify,
                                    rolling=rolling_config(samples.fs_hz, window_s, hop_s),
-                                   regime=RegimeConfig(fs_hz=samples.fs_hz, gap_m=gaps)))
+                                   regime=RegimeConfig(fs_hz=samples.fs_hz, gap_m=gaps, window_s=regime_window_s)))
     rep = PlayReport()
     wall0 = time.monotonic()
     offset = 0.0  # stream time already played in earlier loops

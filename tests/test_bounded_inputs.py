@@ -82,6 +82,8 @@ def test_a_config_over_a_mebibyte_is_refused_before_it_is_read(tmp_path):
     (daq_main, ["record", "--sim", "--duration", "-1"]),
     (daq_main, ["record", "--sim", "--window", "0"]),
     (daq_main, ["record", "--sim", "--window", "2", "--hop", "3"]),
+    (daq_main, ["record", "--sim", "--regime-window", "0.1"]),  # shorter than the monitor's hop
+    (replay_main, ["{rec}", "--regime-window", "0"]),
     (daq_main, ["sim", "--duration", "1e400"]),
     (daq_main, ["sim", "--seed", "-4"]),
     (daq_main, ["record", "--sim", "--gaps", "0.003"]),  # two gaps, tip 1 and tip 2
@@ -190,11 +192,12 @@ def test_fuzz_config_text_never_tracebacks(tmp_path_factory, text):
 
 
 NUMERIC_OPTIONS = [
-    (daq_parser, ["record", "--sim"], ["--duration", "--window", "--hop", "--baud"]),
+    (daq_parser, ["record", "--sim"], ["--duration", "--window", "--hop", "--baud", "--regime-window"]),
     (daq_parser, ["calibrate", "--channel", "tip1"], ["--duration", "--reference-rms", "--reference-hz", "--baud"]),
     (daq_parser, ["sim"], ["--duration", "--seed", "--device-id"]),
     (daq_parser, ["bench"], ["--seconds", "--cases", "--seed", "--minutes"]),
-    (replay_parser, ["play", "x.mcap"], ["--rate", "--start", "--duration", "--window", "--hop", "--fs"]),
+    (replay_parser, ["play", "x.mcap"], ["--rate", "--start", "--duration", "--window", "--hop", "--fs",
+                                         "--regime-window"]),
     (replay_parser, ["import", "x.csv", "-o", "y.mcap"], ["--fs"]),
     (ident_parser, ["fit", "x.mcap"], ["--start", "--duration", "--degree", "--dimension", "--delay", "--fs"]),
     (ident_parser, ["duffing"], ["--seed", "--workers"]),

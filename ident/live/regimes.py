@@ -107,6 +107,11 @@ LEARNED_CAP = 1.5  # largest log-odds a learned gap may give
 ABOVE_HIT_CAP = 1.0  # ... an amplitude above those seen hitting, before any free one was learned
 LEARN_WINDOWS = 400  # confident windows kept per beam for the learned gap and stiffness (100 s at 0.25 s)
 FLOOR_QUANTILE = 0.2
+# the drive's periods a window must hold for its harmonics to stand clear of the fundamental's leakage through the
+# Hann window: with fewer, a pure sine's sidelobes put more than distortion_on into the harmonic band (9e-4 of its
+# power at 3.5 periods, 5.7e-3 at 3, 2.5e-4 to 3.3e-4 at 3.6 to 4), and a free beam reads as hitting; the windows
+# carry their periods and the pipeline says once what window the drive needs (--regime-window)
+MIN_PERIODS = 3.6
 HARMONIC_TOP = 5.5  # the harmonic band's top edge over the drive frequency: below the second modes (module docstring)
 # the coupling's share learned per stream (see _cross_talk): rows kept where the other beam distorts at least
 # CROSS_STRONG times its band's noise and 10 x distortion_on; used from CROSS_MIN_WINDOWS rows within CROSS_BAND
@@ -206,6 +211,7 @@ class RegimeWindow:
     drive_frequency_hz: float
     beams: tuple[BeamState, BeamState]
     amplitude_ratio: float  # displacement amplitude tip1 / tip2 (localisation)
+    periods: float = float("nan")  # the drive's periods in the window (below MIN_PERIODS the harmonics are leakage)
 
     @property
     def impact_rms(self) -> tuple[float, float]:
@@ -751,7 +757,8 @@ def _window(state: RegimeState, sp: _Spectral, t_end: float) -> tuple[RegimeStat
     if changed:
         change = RegimeChange(t_end, decision.label, state.decision.label, beams[0].confidence * beams[1].confidence)
     ratio = zs[0] / zs[1] if zs[1] > 0 else float("inf")
-    window = RegimeWindow(t_end, decision.label, decision.candidate, f, (beams[0], beams[1]), ratio)
+    window = RegimeWindow(t_end, decision.label, decision.candidate, f, (beams[0], beams[1]), ratio,
+                          f * cfg.window_s)
     state = replace(state, power_flow=flow, floors=floors, free_z=tuple(free_z), hit_z=tuple(hit_z),
                     free_w=tuple(free_w), cross=tuple(cross), decision=decision,
                     in_phase=(in_phase[0], in_phase[1]))

@@ -53,8 +53,10 @@ def tune(make, target_hz: float, low: float, high: float) -> BeamSpec:
 
 
 def draw_cantilevers(rng: np.random.Generator, joint_beam: int | None = None,
-                     mistuning: tuple[float, float] = (0.0, 0.15)) -> tuple[tuple[BeamSpec, BeamSpec], dict]:
-    """Two aluminium strips with tip masses, beam 1 at 8-15 Hz, beam 2 mistuned by 0-15 % (length or mass)."""
+                     mistuning: tuple[float, float] = (0.0, 0.15),
+                     first_range_hz: tuple[float, float] = (8.0, 15.0)) -> tuple[tuple[BeamSpec, BeamSpec], dict]:
+    """Two aluminium strips with tip masses, beam 1's first mode drawn in first_range_hz (8-15 Hz), beam 2
+    mistuned by 0-15 % (length or mass)."""
     thickness = float(rng.choice([1.5e-3, 1.5e-3, 2.0e-3]))
     common = dict(width_m=0.02, thickness_m=thickness, youngs_pa=rng.uniform(68e9, 71e9),
                   density_kg_m3=rng.uniform(2660, 2730), n_elements=12)
@@ -68,7 +70,7 @@ def draw_cantilevers(rng: np.random.Generator, joint_beam: int | None = None,
         return BeamSpec(length_m=length, tip_mass_kg=mass, tip_inertia_kg_m2=strip_tip_inertia(mass, *block),
                         root_stiffness_n_m_per_rad=root, **common)
 
-    f1 = rng.uniform(8, 15)
+    f1 = rng.uniform(*first_range_hz)
     b1 = tune(lambda length: make(0, length, tip_mass), f1, 0.08, 0.6)
     mistuning = rng.uniform(*mistuning) * rng.choice([-1, 1])
     via = str(rng.choice(["length", "tip_mass"]))

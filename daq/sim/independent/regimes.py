@@ -75,10 +75,13 @@ class RegimeRig:
         return Setup(self.model, drives, {"base": Output([], [(0, 1.0)]), **tips}, elements=list(self.stoppers))
 
 
-def draw_regime_rig(rng: np.random.Generator, fs_hz: int | None = None, redraw: bool = False) -> RegimeRig:
-    """Two cantilevers (beam 2 mistuned 0-15 %), coupled 1-10 %, on a shaking frame, with stoppers; a rig
-    drawn again because the first could not show every regime is mistuned 5-15 % and coupled 1-5 %."""
-    beams, info = draws.draw_cantilevers(rng, mistuning=(0.05, 0.15) if redraw else (0.0, 0.15))
+def draw_regime_rig(rng: np.random.Generator, fs_hz: int | None = None, redraw: bool = False,
+                    first_range_hz: tuple[float, float] = (8.0, 15.0)) -> RegimeRig:
+    """Two cantilevers (beam 1's first mode in first_range_hz, 8-15 Hz; beam 2 mistuned 0-15 %), coupled 1-10 %,
+    on a shaking frame, with stoppers; a rig drawn again because the first could not show every regime is
+    mistuned 5-15 % and coupled 1-5 %."""
+    beams, info = draws.draw_cantilevers(rng, mistuning=(0.05, 0.15) if redraw else (0.0, 0.15),
+                                         first_range_hz=first_range_hz)
     rig = build_rig(draws.draw_rig(rng, beams, "base", coupling=(0.01, 0.05) if redraw else (0.01, 0.10)))
     drawn_fs = int(rng.choice([500, 1000, 1000, 2000, 2500, 5000]))
     fs = fs_hz or drawn_fs
@@ -353,7 +356,7 @@ def _advance(piece: Piece) -> tuple[State, tuple[float, float, float], np.ndarra
 
 @seeded
 def regime_case(seed: int, fs_hz: int | None = None, segment_s: tuple[float, float] = (10.0, 30.0),
-                max_settings: int = 5) -> Case:
+                max_settings: int = 5, first_range_hz: tuple[float, float] = (8.0, 15.0)) -> Case:
     """A programme through all four regimes (in a random order, then one more random regime).
 
     When a regime cannot be reached (its best drive holds it for less than half of its segment's second
@@ -364,7 +367,7 @@ def regime_case(seed: int, fs_hz: int | None = None, segment_s: tuple[float, flo
     settings tried and what was achieved.
     """
     rng = np.random.default_rng(seed)
-    rr = draw_regime_rig(rng, fs_hz)
+    rr = draw_regime_rig(rng, fs_hz, first_range_hz=first_range_hz)
     order = [str(x) for x in rng.permutation(list(REGIMES))]
     order.append(str(rng.choice(list(REGIMES))))
     durations = [float(round(rng.uniform(*segment_s))) for _ in order]
@@ -382,7 +385,7 @@ def regime_case(seed: int, fs_hz: int | None = None, segment_s: tuple[float, flo
         if setting % 2 == 0:
             rr = set_stoppers(rr, rng, favour={"beam1": 0, "beam2": 1}.get(regime))
         else:
-            rr = draw_regime_rig(rng, rr.fs_hz, redraw=True)
+            rr = draw_regime_rig(rng, rr.fs_hz, redraw=True, first_range_hz=first_range_hz)
     case = _case(rr, pieces, order, seed, rng, "regimes")
     case.truth["settings_tried"] = setting + 1
     return case
@@ -390,7 +393,7 @@ def regime_case(seed: int, fs_hz: int | None = None, segment_s: tuple[float, flo
 
 @seeded
 def steady_case(seed: int, regime: str, minutes: float = 10.0, fs_hz: int = 1000, chunk_s: float = 30.0,
-                max_settings: int = 5) -> Case:
+                max_settings: int = 5, first_range_hz: tuple[float, float] = (8.0, 15.0)) -> Case:
     """minutes of one steady regime (for false-alarm tests).
 
     A 30 s settling segment (not recorded; the instruments run through it) finds a drive that holds the
@@ -402,7 +405,7 @@ def steady_case(seed: int, regime: str, minutes: float = 10.0, fs_hz: int = 1000
     if regime not in REGIMES:
         raise ValueError(f"regime must be one of {tuple(REGIMES)}")
     rng = np.random.default_rng(seed)
-    rr = draw_regime_rig(rng, fs_hz)
+    rr = draw_regime_rig(rng, fs_hz, first_range_hz=first_range_hz)
     settle_s = 30.0
     for setting in range(max_settings):
         last = setting == max_settings - 1
@@ -425,7 +428,7 @@ def steady_case(seed: int, regime: str, minutes: float = 10.0, fs_hz: int = 1000
         if setting % 2 == 0:
             rr = set_stoppers(rr, rng, favour={"beam1": 0, "beam2": 1}.get(regime))
         else:
-            rr = draw_regime_rig(rng, rr.fs_hz, redraw=True)
+            rr = draw_regime_rig(rng, rr.fs_hz, redraw=True, first_range_hz=first_range_hz)
     case = _case(rr, pieces, [regime] * len(pieces), seed, rng, "steady", settle=settle)
     case.truth["settings_tried"] = setting + 1
     case.truth["settling"] = {"duration_s": settle_s, "strategy": settle.plan.strategy,
