@@ -104,7 +104,7 @@ def add_live_options(p, beside: str) -> None:
                    "(default: learned from the data)")
     p.add_argument("--regime-window", type=WINDOW, default=RegimeConfig.window_s,
                    help=f"the regime monitor's window [s] (default {RegimeConfig.window_s:g}); it must hold "
-                        f"{MIN_PERIODS:g} periods of the drive: 1.5 s for a rig driven at 2 Hz")
+                        f"{MIN_PERIODS:g} periods of the drive: 2 s for a rig driven at 2 Hz")
 
 
 def _gaps(text: str) -> tuple[float, float]:
