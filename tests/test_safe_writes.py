@@ -246,7 +246,7 @@ def test_the_regime_benchmark_cache_is_written_whole_and_never_rewritten(tmp_pat
     found there is read, not generated again; a file there that is not a case is refused, not replaced."""
     made = []
 
-    def generate(kind, seed, regime, minutes, fs_hz):
+    def generate(kind, seed, regime, minutes, fs_hz, first):
         made.append(seed)
         return bench_regimes.CaseData(500.0, np.arange(30.0).reshape(10, 3), np.zeros(10, int), {"seed": seed})
 
@@ -259,3 +259,6 @@ def test_the_regime_benchmark_cache_is_written_whole_and_never_rewritten(tmp_pat
     with pytest.raises(ValueError, match="not a case this benchmark wrote"):
         bench_regimes.load_case("regimes", 8, cache=tmp_path)
     assert (tmp_path / "regimes_8.npz").read_bytes() == PRECIOUS and made == [7]
+    # a slow rig (--first-hz) is another case under another name, never the default draw's file
+    bench_regimes.load_case("regimes", 7, cache=tmp_path, first=(3.5, 6.0))
+    assert made == [7, 7] and (tmp_path / "regimes_7_first3.5-6Hz.npz").is_file()
