@@ -58,16 +58,17 @@ class BeamsFit:
     one_tone_hz: float | None  # the excitation's frequency when it is one tone, else None
 
 
-def regime_spans(values: np.ndarray, fs_hz: float) -> tuple[RegimeSpan, ...]:
+def regime_spans(values: np.ndarray, fs_hz: float, window_s: float = RegimeConfig.window_s) -> tuple[RegimeSpan, ...]:
     """The reported regime over the recording as spans: the first from 0 s, each change ends one span and
     starts the next at the change's time, the last ends at the end of the data.
 
-    The monitor reports a window's regime at the window's end (0.5 s windows every 0.25 s, a new regime after
-    two windows); before its first window the regime is that window's.
+    The monitor reports a window's regime at the window's end (windows of window_s, 0.5 s by default, every
+    0.25 s, a new regime after two windows); before its first window the regime is that window's. A window
+    must hold ``MIN_PERIODS`` periods of the drive (3.6: 0.5 s down to 7.2 Hz; see ``ident.live.regimes``).
     """
     x = np.asarray(values, float)
     duration = len(x) / fs_hz
-    windows, changes = RegimeMonitor(RegimeConfig(fs_hz=fs_hz)).step(x)
+    windows, changes = RegimeMonitor(RegimeConfig(fs_hz=fs_hz, window_s=window_s)).step(x)
     if not windows:
         raise ValueError(f"{duration:.2f} s is shorter than one regime window; nothing to report")
     spans, start, label = [], 0.0, windows[0].label

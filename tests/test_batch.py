@@ -237,3 +237,13 @@ def test_which_natural_frequencies_the_report_trusts():
     assert distrust({**row, "beam2_nrmse": "0.31"}, 2) == "NRMSE > 0.3"
     assert distrust({**row, "fit_note": "one-tone excitation (12.3 Hz): ..."}, 2) == "one tone"
     assert distrust({**row, "beam2_natural_frequency_hz": "nan"}, 2) == "no fit"
+
+
+def test_a_regime_window_other_than_the_default_is_part_of_the_settings():
+    """Rows computed with another --regime-window are other results: the settings' text names the window, so a
+    table of one is not continued with the other; the default leaves the text as tables written before have it."""
+    default = batch.Settings(("regimes",))
+    assert "regime_window_s" not in json.loads(default.signature())
+    longer = batch.Settings(("regimes",), regime_window_s=1.0)
+    assert json.loads(longer.signature())["regime_window_s"] == 1.0
+    assert batch.Settings(("fit",), regime_window_s=1.0).signature() == batch.Settings(("fit",)).signature()

@@ -201,7 +201,8 @@ NUMERIC_OPTIONS = [
     (replay_parser, ["import", "x.csv", "-o", "y.mcap"], ["--fs"]),
     (ident_parser, ["fit", "x.mcap"], ["--start", "--duration", "--degree", "--dimension", "--delay", "--fs"]),
     (ident_parser, ["duffing"], ["--seed", "--workers"]),
-    (ident_parser, ["batch", "x.mcap", "--fit", "-o", "r.csv"], ["--start", "--duration", "--fs", "--workers"]),
+    (ident_parser, ["batch", "x.mcap", "--fit", "-o", "r.csv"], ["--start", "--duration", "--fs", "--workers",
+                                                                 "--regime-window"]),
     (ident_parser, ["bench", "batch"], ["--duration", "--recordings", "--seed", "--cases", "--workers"]),
 ]
 

@@ -46,12 +46,14 @@ from ..jsonsafe import finite
 from ..campaign import fit_beams, regime_durations, regime_spans
 from ..discovery import Channel, Measurement, discover
 from ..discovery.result import candidate_json
+from ..live.regimes import MIN_PERIODS, RegimeConfig
 from ..rig import RigParams
-from . import DURATION, OFFSET, RATE_HZ
+from . import DURATION, OFFSET, RATE_HZ, number
 from .batch_report import trusted_frequency, write_report
 from .discover import load_model
 from .engine import add_options, cores, session, unordered
 
+REGIME_WINDOW = number(RegimeConfig.hop_s, 60.0, unit="s")  # at least the monitor's hop
 ANALYSES = ("regimes", "fit", "discover")  # the order they run in, and their columns' order
 COLUMNS = ("file", "format", "bytes", "modified", "settings", "fs_hz", "duration_s", "samples", "filled_samples",
            "regimes", "regime_durations_s", "regime_changes",
@@ -68,6 +70,9 @@ def add_parser(sub) -> None:
                    help="recordings (.mcap, .csv, .mat, .uff, .tdms), folders (their recordings) or quoted "
                         "glob patterns ('campaign/**/*.mcap')")
     p.add_argument("--regimes", action="store_true", help="the regime monitor: regimes and their durations")
+    p.add_argument("--regime-window", type=REGIME_WINDOW, default=RegimeConfig.window_s,
+                   help=f"--regimes: the monitor's window (default {RegimeConfig.window_s:g} s); it must hold "
+                        f"{MIN_PERIODS:g} periods of the drive: 1 s for a rig driven at 3.6-7.2 Hz")
     p.add_argument("--fit", action="store_true", help="each beam's equations and natural frequency")
     p.add_argument("--discover", action="store_true", help="what the model misses: findings and gains")
     p.add_argument("--model", type=Path, help="--discover: a rig config (YAML) whose rig model is the baseline "
@@ -101,6 +106,7 @@ class Settings:
     model_sha256: str = ""
     time_col: str | None = None
     fs_hz: float | None = None
+    regime_window_s: float = RegimeConfig.window_s
 
     def signature(self) -> str:
         """The settings as one JSON text (a row is reused only under the same)."""
@@ -111,6 +117,8 @@ class Settings:
             sig.update(model=self.model_file or "modal baseline", model_sha256=self.model_sha256 or None)
         if self.time_col or self.fs_hz:
             sig.update(time=self.time_col, fs_hz=self.fs_hz)
+        if "regimes" in self.analyses and self.regime_window_s != RegimeConfig.window_s:
+            sig.update(regime_window_s=self.regime_window_s)
         return _json(sig)
 
 
@@ -133,7 +141,7 @@ def _one_line(what: str, exc: BaseException) -> str:
 
 
 def _regimes(s, settings: Settings) -> dict:
-    spans = regime_spans(s.values, s.fs_hz)
+    spans = regime_spans(s.values, s.fs_hz, settings.regime_window_s)
     return {"regimes": _json([{"regime": x.regime, "start_s": x.start_s, "end_s": x.end_s} for x in spans]),
             "regime_durations_s": _json(regime_durations(spans)), "regime_changes": len(spans) - 1}
 
@@ -336,7 +344,7 @@ def plan(args) -> Plan:
         table = {}
     model = load_model(args.model) if args.model else None
     settings = Settings(analyses, args.start, args.duration, model, str(args.model or ""),
-                        _sha256(args.model) if args.model else "", args.time_col, args.fs_hz)
+                        _sha256(args.model) if args.model else "", args.time_col, args.fs_hz, args.regime_window)
     sig = settings.signature()
     other = sorted({r["settings"] for r in table.values()} - {sig})
     if other:
