@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.cli import SEED, number
+from ident.cli import REGIME_WINDOW, SEED, number
 from ident.live.regimes import LABELS, RegimeConfig, regime_start, regime_step
 from ident.live.scoring import score_regimes
 
@@ -58,7 +58,7 @@ def add_arguments(p) -> None:
     g.add_argument("--first-hz", metavar="LO,HI", type=_first_range, default=FIRST_RANGE_HZ,
                    help="--regimes: the range beam 1's first mode is drawn from (default 8,15 Hz; "
                         "3.5,6 for slow rigs)")
-    g.add_argument("--regime-window", type=number(0.25, 60.0, unit="s"), default=RegimeConfig.window_s,
+    g.add_argument("--regime-window", type=REGIME_WINDOW, default=RegimeConfig.window_s,
                    help=f"--regimes: the monitor's window (default {RegimeConfig.window_s:g} s)")
 
 

@@ -1,6 +1,7 @@
 """Bounded inputs: the issue's hanging and crashing inputs refused in one line, then a hypothesis fuzz of
 config files and of every command's arguments that counts tracebacks (there must be none)."""
 
+import argparse
 import math
 import time
 from pathlib import Path
@@ -84,6 +85,8 @@ def test_a_config_over_a_mebibyte_is_refused_before_it_is_read(tmp_path):
     (daq_main, ["record", "--sim", "--window", "2", "--hop", "3"]),
     (daq_main, ["record", "--sim", "--regime-window", "0.1"]),  # shorter than the monitor's hop
     (replay_main, ["{rec}", "--regime-window", "0"]),
+    (ident_main, ["batch", "{rec}", "--regimes", "--regime-window", "0.2", "-o", "r.csv"]),
+    (daq_main, ["bench", "--regimes", "--regime-window", "0.2"]),
     (daq_main, ["sim", "--duration", "1e400"]),
     (daq_main, ["sim", "--seed", "-4"]),
     (daq_main, ["record", "--sim", "--gaps", "0.003"]),  # two gaps, tip 1 and tip 2
@@ -263,3 +266,13 @@ def test_zz_fuzz_tally():
     """Runs after the fuzz tests of this module: the count the issue asks for."""
     print(f"\nfuzz of configs and arguments: {len(TRACEBACKS)} tracebacks")
     assert TRACEBACKS == []
+
+
+def test_the_regime_window_option_starts_at_the_monitors_hop():
+    """One range for --regime-window in record, replay, batch and the bench: from the monitor's hop."""
+    from ident.cli import REGIME_WINDOW
+    from ident.live.regimes import RegimeConfig
+
+    assert REGIME_WINDOW(str(RegimeConfig.hop_s)) == RegimeConfig.hop_s
+    with pytest.raises(argparse.ArgumentTypeError):
+        REGIME_WINDOW(str(0.99 * RegimeConfig.hop_s))

@@ -77,6 +77,7 @@ DURATION = number(0.0, 1e7, gt=True, unit="s")  # finite, > 0, at most about 115
 OFFSET = number(0.0, 1e7, unit="s")
 RATE_HZ = number(1.0, 100_000.0, unit="Hz")
 WINDOW = number(0.0, 600.0, gt=True, unit="s")
+REGIME_WINDOW = number(0.25, 600.0, unit="s")  # the regime monitor's window: at least its hop (RegimeConfig.hop_s)
 PLAY_RATE = number(0.01, 1000.0)
 SEED = number(0, 2**32 - 1, integer=True)
 

@@ -48,12 +48,11 @@ from ..discovery import Channel, Measurement, discover
 from ..discovery.result import candidate_json
 from ..live.regimes import MIN_PERIODS, RegimeConfig
 from ..rig import RigParams
-from . import DURATION, OFFSET, RATE_HZ, number
+from . import DURATION, OFFSET, RATE_HZ, REGIME_WINDOW
 from .batch_report import trusted_frequency, write_report
 from .discover import load_model
 from .engine import add_options, cores, session, unordered
 
-REGIME_WINDOW = number(RegimeConfig.hop_s, 60.0, unit="s")  # at least the monitor's hop
 ANALYSES = ("regimes", "fit", "discover")  # the order they run in, and their columns' order
 COLUMNS = ("file", "format", "bytes", "modified", "settings", "fs_hz", "duration_s", "samples", "filled_samples",
            "regimes", "regime_durations_s", "regime_changes",
