@@ -21,7 +21,7 @@ from threadpoolctl import threadpool_limits
 from ..rig import RigParams
 from .backbone import free_decay
 from .baselines import Baseline
-from .baselines.modal import ModalBaseline, drivable, structural
+from .baselines.modal import ModalBaseline, check_errors, drivable, structural
 from .baselines.rig import RigBaseline
 from .catalogue import CAUSES
 from .characterise import characterise
@@ -67,6 +67,31 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
         raise ValueError("no lightly damped mode in the data: nothing resonates in the band "
                          f"{prep0.band[0]:.3g}-{prep0.band[1]:.3g} Hz")
     return modal_band(first.model.frequencies_hz[light], m.fs_hz, min(m.n, src.n)), first.model.poles[light]
+
+
+def _fit_in_band(prep: Prepared, split: Split, poles0: np.ndarray) -> ModalBaseline:
+    """The baseline in the modes' band, fitted on the training blocks from the first fit's poles, or from
+    the poles of the order chosen again in this band (every third training block left out to choose it)
+    when that model predicts every response on the left-out blocks better than zero does and with 10 %
+    less error (summed over the responses) than the first fit's poles.
+
+    The first fit's band can be ruled by other modes: a hammer's accelerations by the beams' second and
+    third modes, where its order search stops at one first mode of two (independent twin 68: held out at
+    0.85 with one mode, 0.13 with both). Where neither model predicts the left-out blocks (a hardening
+    beam's hammer decay, independent seeds 10 and 31: both err 45-1,000 times that response) the first
+    fit's order stays."""
+    segs = split.train
+    check = segs[2::3] if len(segs) >= 3 else ()
+    if check:
+        rows, at = rows_of([s for s in segs if s not in check]), rows_of(check)
+        try:
+            searched = ModalBaseline.fit(prep, rows, check=at).model.poles
+            mine, theirs = check_errors(searched, prep, rows, at), check_errors(poles0, prep, rows, at)
+            if np.all(mine < 1.0) and mine.sum() < 0.9 * theirs.sum():
+                poles0 = searched
+        except NUMERIC_FAILURES:
+            pass
+    return ModalBaseline.fit(prep, split.rows("train"), poles0=poles0)
 
 
 def _split(prep: Prepared, train: slice | None = None, test: slice | None = None) -> Split:
@@ -117,7 +142,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
             baseline = ModalBaseline.fit(prep_fit, np.arange(prep_fit.edge, prep_fit.n - prep_fit.edge),
                                          poles0=poles0)
         else:
-            baseline = ModalBaseline.fit(prep, split.rows("train"), poles0=poles0)
+            baseline = _fit_in_band(prep, split, poles0)
     warm = _warm(baseline, prep)
     bound = 50.0 * float(np.max(np.abs(prep.zva[0]))) + 1e-300
 

@@ -98,6 +98,13 @@ def _per_response(fit: np.ndarray, meas: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean((fit - meas) ** 2, axis=0)) / np.maximum(meas.std(axis=0), 1e-300)
 
 
+def check_errors(poles: np.ndarray, prep: Prepared, rows: np.ndarray, check: np.ndarray) -> np.ndarray:
+    """Each response's NRMSE on the rows ``check`` of the model with these poles whose residues are fitted
+    on ``rows``, from the measured input alone (see ``fit_residues``)."""
+    _, fit = fit_residues(np.asarray(poles, complex), prep, rows, at=check)
+    return _per_response(fit, prep.measured[check])
+
+
 def _nrmse(fit: np.ndarray, meas: np.ndarray) -> float:
     return float(np.mean(_per_response(fit, meas)))
 
