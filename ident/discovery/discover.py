@@ -2,7 +2,8 @@
 
     Measurement ──prepare──> Prepared (band, signs, kinematics)
          │                      │
-         │          baseline: RigBaseline(config) | ModalBaseline.fit(training or fit data)
+         │          baseline: RigBaseline(config) | ModalBaseline.fit(training or fit data),
+         │                    its order chosen in the preliminary band, then again in the modes' band
          │                      │
          └── split (interleaved blocks) ── baseline scored per held-out block ── transients left out
                                 │
