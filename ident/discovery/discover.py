@@ -55,10 +55,8 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
     src = fit_data or m
     prep0 = prepare(src)
     split0 = _split(prep0, None if fit_data else train, None if fit_data else test)
-    segs = split0.blocks if fit_data else split0.train
-    check = segs[2::3] if len(segs) >= 3 else ()
-    first = ModalBaseline.fit(prep0, rows_of([s for s in segs if s not in check]),
-                              check=rows_of(check) if check else None)
+    rows, check = _held_back(split0.blocks if fit_data else split0.train)
+    first = ModalBaseline.fit(prep0, rows, check=check)
     # the band is where the modes are: a pole whose decay the record cannot resolve is a sinusoid the
     # fit kept (independent seed 81: 1.44 Hz at zeta 1e-27 set the band's low edge at 0.73 Hz, where
     # the rig's first mode is 7.3 Hz), not a mode
@@ -68,6 +66,13 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
         raise ValueError("no lightly damped mode in the data: nothing resonates in the band "
                          f"{prep0.band[0]:.3g}-{prep0.band[1]:.3g} Hz")
     return modal_band(first.model.frequencies_hz[light], m.fs_hz, min(m.n, src.n)), first.model.poles[light]
+
+
+def _held_back(segs: list[slice]) -> tuple[np.ndarray, np.ndarray | None]:
+    """The rows a modal fit is fitted on and the rows its order is chosen on: every third block held back
+    (None with fewer than three blocks, where the fit error chooses)."""
+    check = segs[2::3] if len(segs) >= 3 else []
+    return rows_of([s for s in segs if s not in check]), (rows_of(check) if check else None)
 
 
 def _fit_in_band(prep: Prepared, split: Split, poles0: np.ndarray) -> ModalBaseline:
@@ -81,10 +86,8 @@ def _fit_in_band(prep: Prepared, split: Split, poles0: np.ndarray) -> ModalBasel
     0.85 with one mode, 0.13 with both). Where neither model predicts the left-out blocks (a hardening
     beam's hammer decay, independent seeds 10 and 31: both err 45-1,000 times that response) the first
     fit's order stays."""
-    segs = split.train
-    check = segs[2::3] if len(segs) >= 3 else ()
-    if check:
-        rows, at = rows_of([s for s in segs if s not in check]), rows_of(check)
+    rows, at = _held_back(split.train)
+    if at is not None:
         try:
             searched = ModalBaseline.fit(prep, rows, check=at).model.poles
             mine, theirs = check_errors(searched, prep, rows, at), check_errors(poles0, prep, rows, at)
