@@ -2,8 +2,9 @@
 equations and natural frequency, discovery's findings. Pure: samples in, dataclasses out (``ident batch``,
 in ``ident.cli.batch``, reads the files and runs these as Dask tasks).
 
-- :func:`regime_spans`: the regime monitor (``ident.live.regimes``) run over the whole recording, its
-  reported (debounced) regime as spans of time. This one function is the campaign's only contact with the
+- :func:`regime_record`: the regime monitor (``ident.live.regimes``) run over the whole recording, its
+  reported (debounced) regime as spans of time, and whether the drive was too slow for the window (the live
+  pipeline's ``regime_note``, by the same rule). This one function is the campaign's only contact with the
   monitor's API.
 - :func:`fit_beams`: per beam, SINDy in physical coordinates on one segment, as one window of the rolling
   identification (``ident.live.rolling``): relative acceleration r = tip - base low-passed, integrated
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .library import PolynomialForcingLibrary
-from .live.regimes import RegimeConfig, RegimeMonitor
+from .live.regimes import RegimeConfig, RegimeMonitor, SlowDrive, SlowDriveWatch
 from .live.rolling import RollingConfig, ident_rate, window_coordinates
 from .model import SindyModel
 from .sindy import refine, sweep
@@ -58,13 +59,20 @@ class BeamsFit:
     one_tone_hz: float | None  # the excitation's frequency when it is one tone, else None
 
 
-def regime_spans(values: np.ndarray, fs_hz: float, window_s: float = RegimeConfig.window_s) -> tuple[RegimeSpan, ...]:
+@dataclass(frozen=True)
+class RegimeRecord:
+    spans: tuple[RegimeSpan, ...]
+    slow_drive: SlowDrive | None  # the first time the drive stayed too slow for the window (2 s running), if any
+
+
+def regime_record(values: np.ndarray, fs_hz: float, window_s: float = RegimeConfig.window_s) -> RegimeRecord:
     """The reported regime over the recording as spans: the first from 0 s, each change ends one span and
     starts the next at the change's time, the last ends at the end of the data.
 
     The monitor reports a window's regime at the window's end (windows of window_s, 0.5 s by default, every
     0.25 s, a new regime after two windows); before its first window the regime is that window's. A window
-    must hold ``MIN_PERIODS`` periods of the drive (3.6: 0.5 s down to 7.2 Hz; see ``ident.live.regimes``).
+    must hold ``MIN_PERIODS`` periods of the drive (3.6: 0.5 s down to 7.2 Hz; see ``ident.live.regimes``);
+    where the drive held fewer for 2 s running, ``slow_drive`` says when and which window would do.
     """
     x = np.asarray(values, float)
     duration = len(x) / fs_hz
@@ -76,7 +84,7 @@ def regime_spans(values: np.ndarray, fs_hz: float, window_s: float = RegimeConfi
         spans.append(RegimeSpan(label, start, c.t_s))
         start, label = c.t_s, c.regime
     spans.append(RegimeSpan(label, start, duration))
-    return tuple(spans)
+    return RegimeRecord(tuple(spans), SlowDriveWatch(window_s).update(windows))
 
 
 def regime_durations(spans: tuple[RegimeSpan, ...]) -> dict[str, float]:

@@ -247,3 +247,30 @@ def test_a_regime_window_other_than_the_default_is_part_of_the_settings():
     longer = batch.Settings(("regimes",), regime_window_s=1.0)
     assert json.loads(longer.signature())["regime_window_s"] == 1.0
     assert batch.Settings(("fit",), regime_window_s=1.0).signature() == batch.Settings(("fit",)).signature()
+
+
+def test_a_drive_too_slow_for_the_regime_window_is_said_in_the_row_and_the_summary(tmp_path):
+    """A linear rig driven at 6.5 Hz: 3.25 periods in the default 0.5 s window, fewer than the 3.6 its
+    harmonics need (ident.live.regimes.MIN_PERIODS). The row's ``regime_note`` says so with the window that
+    would do, as the live pipeline's regime_note does; with ``--regime-window 1`` nothing is said."""
+    fs, n = 1000.0, 12000
+    t = np.arange(n) / fs
+    v = np.column_stack([np.sin(2 * np.pi * 6.5 * t), 10 * np.sin(2 * np.pi * 6.5 * t - np.pi / 2),
+                         8 * np.sin(2 * np.pi * 6.5 * t - 1.2)]) + np.random.default_rng(0).normal(0, 0.01, (n, 3))
+    rec = tmp_path / "slow.csv"
+    write_samples(rec, Samples(t, v, fs, np.arange(n), str(rec)))
+    notes = {}
+    for window in ("0.5", "1"):
+        out = tmp_path / f"w{window}.csv"
+        report = tmp_path / f"report{window}"
+        code, stdout, err, tb = run_main(ident_main, ["batch", rec, "--regimes", "--regime-window", window,
+                                                      "--time", "t", "--workers", "0", "--no-progress", "-o", out,
+                                                      "--report", report])
+        assert code == 0 and tb is None, err
+        (row,) = table(out)
+        notes[window] = (row["regime_note"], stdout, (report / "README.md").read_text())
+    note, stdout, md = notes["0.5"]
+    assert note.startswith("from 2.25 s: the drive at 6.5") and "--regime-window 1 or more" in note
+    assert "regime window too short for the drive in 1 recording" in stdout and "slow.csv" in stdout
+    assert f"- `slow.csv`: {note}" in md.splitlines()
+    assert notes["1"][0] == "" and "too short" not in notes["1"][1] and "too slow" not in notes["1"][2]

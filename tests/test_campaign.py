@@ -11,7 +11,8 @@ import pytest
 
 from daq.sim.excitation import Excitation
 from daq.sim.rig import RigConfig, simulate_rig
-from ident.campaign import fit_beams, one_tone, regime_durations, regime_spans
+from ident.campaign import fit_beams, one_tone, regime_durations, regime_record
+from ident.live.regimes import MIN_PERIODS, SLOW_WINDOWS
 from ident.rig import RigParams
 from replay.formats import read_samples
 
@@ -23,7 +24,9 @@ def test_regime_spans_follow_the_transitions_programme():
     12 s, down at 16 s, both at 20 s; each change is reported within a second after its cause (0.5 s windows
     every 0.25 s, two windows of dwell), and the spans tile the 26 s."""
     s = read_samples(REC / "transitions.mcap")
-    spans = regime_spans(s.values, s.fs_hz)
+    r = regime_record(s.values, s.fs_hz)
+    spans = r.spans
+    assert r.slow_drive is None  # a 12-14 Hz drive makes 6-7 periods in a 0.5 s window
     assert [x.regime for x in spans] == ["linear", "localized-1", "linear", "localized-2", "linear",
                                          "impacting-both"]
     for span, cause in zip(spans[1:], (4.0, 8.0, 12.0, 16.0, 20.0)):
@@ -42,9 +45,16 @@ def test_regime_spans_of_a_slow_drive_need_a_longer_window():
     t = np.arange(int(20 * fs)) / fs
     x = np.column_stack([np.sin(2 * np.pi * 6.5 * t), 10 * np.sin(2 * np.pi * 6.5 * t - np.pi / 2),
                          8 * np.sin(2 * np.pi * 6.5 * t - 1.2)]) + np.random.default_rng(0).normal(0, 0.01, (len(t), 3))
-    assert "impacting-both" in [span.regime for span in regime_spans(x, fs)]
-    assert [(span.regime, span.start_s, span.end_s) for span in regime_spans(x, fs, window_s=1.0)] == [
-        ("linear", 0.0, pytest.approx(20.0))]
+    short = regime_record(x, fs)
+    assert "impacting-both" in [span.regime for span in short.spans]
+    slow = short.slow_drive
+    assert slow.drive_frequency_hz == pytest.approx(6.5, abs=0.1) and slow.periods == pytest.approx(3.25, abs=0.05)
+    assert slow.t_s == pytest.approx(SLOW_WINDOWS * 0.25 + 0.25)  # windows end every 0.25 s from 0.5 s
+    assert slow.window_needed_s == 1.0 and 1.0 * 6.5 >= MIN_PERIODS > 0.5 * 6.5
+    assert "--regime-window 1 or more" in slow.message
+    long = regime_record(x, fs, window_s=1.0)
+    assert [(span.regime, span.start_s, span.end_s) for span in long.spans] == [("linear", 0.0, pytest.approx(20.0))]
+    assert long.slow_drive is None
 
 
 def _broadband(fn1_hz: float, fn2_hz: float, fs_hz: float = 500.0, duration_s: float = 7.0) -> np.ndarray:

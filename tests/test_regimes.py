@@ -9,9 +9,9 @@ import pytest
 from daq.sim.excitation import Kick, Step
 from daq.sim.rig import RigConfig, simulate_rig
 from daq.sim.sensors import to_counts
-from ident.live.pipeline import NOTE_WINDOWS, Pipeline, PipelineConfig
+from ident.live.pipeline import Pipeline, PipelineConfig
 from ident.live.regimes import (CROSS_BAND, CROSS_MARGIN, CROSS_MIN_WINDOWS, CROSS_QUANTILE, LABELS, MIN_PERIODS,
-                                PHASE_REFERENCE, PHASE_Z, Decision, RegimeConfig, RegimeMonitor, _cross_talk,
+                                PHASE_REFERENCE, PHASE_Z, SLOW_WINDOWS, Decision, RegimeConfig, RegimeMonitor, _cross_talk,
                                 _gap_evidence, _half_phasors, _in_phase, _own_contact, decide, label_of,
                                 regime_start, regime_step, spectral_features)
 from ident.live.scoring import score_regimes, true_changes
@@ -483,7 +483,7 @@ def test_a_window_too_short_for_the_drive_is_said_and_a_longer_one_sees_a_linear
     if not short:
         assert notes == [] and all(w.label == "linear" for w in out.windows)
         return
-    assert len(notes) == 1 and notes[0]["t"] == pytest.approx(NOTE_WINDOWS * 0.25 + 0.25)
+    assert len(notes) == 1 and notes[0]["t"] == pytest.approx(SLOW_WINDOWS * 0.25 + 0.25)
     assert "--regime-window 1 or more" in notes[0]["message"]
     assert out.windows[-1].label == "impacting-both"  # what the note warns of
     windows, changes = RegimeMonitor(RegimeConfig(fs_hz=1000.0, window_s=1.0)).step(sine_rig(f_hz))

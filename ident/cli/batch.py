@@ -43,7 +43,7 @@ from daq.safeio import Output, check_outputs, safe_folder, safe_output, same_fil
 from replay.formats import FORMATS, format_of, mcap, read_samples
 
 from ..jsonsafe import finite
-from ..campaign import fit_beams, regime_durations, regime_spans
+from ..campaign import fit_beams, regime_durations, regime_record
 from ..discovery import Channel, Measurement, discover
 from ..discovery.result import candidate_json
 from ..live.regimes import MIN_PERIODS, RegimeConfig
@@ -55,7 +55,7 @@ from .engine import add_options, cores, session, unordered
 
 ANALYSES = ("regimes", "fit", "discover")  # the order they run in, and their columns' order
 COLUMNS = ("file", "format", "bytes", "modified", "settings", "fs_hz", "duration_s", "samples", "filled_samples",
-           "regimes", "regime_durations_s", "regime_changes",
+           "regimes", "regime_durations_s", "regime_changes", "regime_note",
            "fit_segment_s", "beam1_natural_frequency_hz", "beam2_natural_frequency_hz", "beam1_nrmse",
            "beam2_nrmse", "beam1_equations", "beam2_equations", "fit_note",
            "verdict", "n_findings", "gain", "findings",
@@ -140,9 +140,11 @@ def _one_line(what: str, exc: BaseException) -> str:
 
 
 def _regimes(s, settings: Settings) -> dict:
-    spans = regime_spans(s.values, s.fs_hz, settings.regime_window_s)
-    return {"regimes": _json([{"regime": x.regime, "start_s": x.start_s, "end_s": x.end_s} for x in spans]),
-            "regime_durations_s": _json(regime_durations(spans)), "regime_changes": len(spans) - 1}
+    r = regime_record(s.values, s.fs_hz, settings.regime_window_s)
+    slow = r.slow_drive
+    return {"regimes": _json([{"regime": x.regime, "start_s": x.start_s, "end_s": x.end_s} for x in r.spans]),
+            "regime_durations_s": _json(regime_durations(r.spans)), "regime_changes": len(r.spans) - 1,
+            "regime_note": f"from {slow.t_s:g} s: {slow.message}" if slow else ""}
 
 
 def _fit(s, settings: Settings) -> dict:
@@ -412,6 +414,11 @@ def summary(rows: list[dict], path: Path) -> str:
             durations[k] = durations.get(k, 0.0) + v
     if durations:
         lines.append("time in each regime: " + ", ".join(f"{k} {v:.1f} s" for k, v in durations.items()))
+    slow = [r for r in rows if r["regime_note"]]
+    if slow:
+        lines.append(f"regime window too short for the drive in {len(slow)} recording{'s' * (len(slow) > 1)} "
+                     f"(column 'regime_note'; hitting there may be the window's leakage), first "
+                     f"{Path(slow[0]['file']).name}: {slow[0]['regime_note']}")
     for beam in (1, 2):
         fn = [x for x in (trusted_frequency(r, beam) for r in rows if r["beam1_equations"]) if math.isfinite(x)]
         if any(r["beam1_equations"] for r in rows):

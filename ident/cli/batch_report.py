@@ -177,6 +177,14 @@ def write_report(rows: list[dict], folder: Path, table: Path) -> None:
                 n = sum(1 for r in rows if label in _loads(r["regime_durations_s"], {}))
                 md.append(f"| {label} | {total[label]:.1f} | {n} |")
         md += ["", "![regimes](regimes.png)", ""]
+        slow = [r for r in rows if r["regime_note"]]
+        if slow:
+            md += [f"The drive was too slow for the regime window in {len(slow)} recording(s) (column `regime_note`): "
+                   "there a free beam may read as hitting.", ""]
+            md += [f"- `{Path(r['file']).name}`: {r['regime_note']}" for r in slow[:10]]
+            if len(slow) > 10:
+                md.append(f"- ... and {len(slow) - 10} more")
+            md.append("")
     if has["fit"]:
         figure_natural_frequency(rows, folder / "natural_frequency.png")
         md += ["## Natural frequencies", ""]

@@ -15,7 +15,6 @@ since the start of the stream, counted in samples.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -26,7 +25,7 @@ from ..library import PolynomialForcingLibrary
 from ..physical import KERNELS as PHYSICAL_KERNELS
 from ..simulate import KERNELS as INTEGRATION_KERNELS, PARALLEL_MIN_WORK, kernels_cached as _cached, simulate
 from ..sindy import KERNELS as SINDY_KERNELS, integration_errors
-from .regimes import KERNELS as REGIME_KERNELS, MIN_PERIODS, RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow
+from .regimes import KERNELS as REGIME_KERNELS, RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow, SlowDriveWatch
 from .rolling import RollingConfig, RollingIdentifier, WindowFit, window_coordinates
 
 
@@ -92,7 +91,6 @@ def model_records(fit: WindowFit) -> list[dict]:
     return out
 
 
-NOTE_WINDOWS = 8  # consecutive regime windows (2 s) too short for the drive before the pipeline says so
 MONITOR_KERNELS = CAUSAL_KERNELS + REGIME_KERNELS  # the causal filter's and the regime monitor's (always run)
 IDENTIFY_KERNELS = (INTEGRATION_KERNELS + SINDY_KERNELS + ENSEMBLE_KERNELS + FILTER_KERNELS
                     + PHYSICAL_KERNELS)  # ... the rolling fits run
@@ -152,8 +150,7 @@ class Pipeline:
         self.rolling = RollingIdentifier(cfg.rolling) if cfg.identify else None
         self.n_seen = 0
         self._started = False
-        self._noted = False  # the regime_note about too short a regime window, said once
-        self._short = 0  # consecutive regime windows with fewer than MIN_PERIODS periods of the drive
+        self._slow = SlowDriveWatch(cfg.regime.window_s)  # the regime_note about too short a regime window
 
     def step(self, block: np.ndarray) -> StepOutput:
         x = np.asarray(block, float)
@@ -182,19 +179,9 @@ class Pipeline:
             w = windows[0]
             events.append({"t": w.t_s, "kind": "regime_start", "regime": w.label,
                            "confidence": w.confidence})
-        short = None
-        for w in windows:  # said once the drive has stayed that slow for 2 s (not while a drive stops or starts)
-            self._short = self._short + 1 if w.periods < MIN_PERIODS else 0
-            if self._short == NOTE_WINDOWS and short is None:
-                short = w
-        if short is not None and not self._noted:
-            self._noted = True
-            need = math.ceil(2 * MIN_PERIODS / short.drive_frequency_hz) / 2 if short.drive_frequency_hz > 0 else 0
-            events.append({"t": short.t_s, "kind": "regime_note", "message": (
-                f"the drive at {short.drive_frequency_hz:.2f} Hz makes {short.periods:.1f} periods in the regime "
-                f"monitor's {self.cfg.regime.window_s:g} s window, fewer than {MIN_PERIODS:g}: the window's leakage "
-                f"puts more than the distortion threshold into the harmonics, so a free beam may read as hitting"
-                + (f"; give --regime-window {need:g} or more" if need else ""))})
+        slow = self._slow.update(windows)
+        if slow is not None:
+            events.append({"t": slow.t_s, "kind": "regime_note", "message": slow.message})
         events += [{"t": c.t_s, "kind": "regime", "regime": c.regime, "previous": c.previous,
                     "confidence": c.confidence} for c in changes]
         for f in fits:

@@ -112,6 +112,7 @@ FLOOR_QUANTILE = 0.2
 # power at 3.5 periods, 5.7e-3 at 3, 2.5e-4 to 3.3e-4 at 3.6 to 4), and a free beam reads as hitting; the windows
 # carry their periods and the pipeline says once what window the drive needs (--regime-window)
 MIN_PERIODS = 3.6
+SLOW_WINDOWS = 8  # consecutive windows (2 s at the 0.25 s hop) too short for the drive before it is said
 HARMONIC_TOP = 5.5  # the harmonic band's top edge over the drive frequency: below the second modes (module docstring)
 # the coupling's share learned per stream (see _cross_talk): rows kept where the other beam distorts at least
 # CROSS_STRONG times its band's noise and 10 x distortion_on; used from CROSS_MIN_WINDOWS rows within CROSS_BAND
@@ -233,6 +234,51 @@ class RegimeChange:
     regime: str
     previous: str
     confidence: float = float("nan")
+
+
+@dataclass(frozen=True)
+class SlowDrive:
+    """The drive has held fewer than ``MIN_PERIODS`` periods in every window for ``SLOW_WINDOWS`` windows
+    running: the window's leakage then reads as distortion, and a free beam may read as hitting."""
+
+    t_s: float  # end of the window at which it was said
+    drive_frequency_hz: float
+    periods: float  # the drive's periods in that window
+    window_s: float  # the monitor's window
+
+    @property
+    def window_needed_s(self) -> float:
+        """The shortest window, in half seconds, that holds ``MIN_PERIODS`` periods (0 without a drive)."""
+        f = self.drive_frequency_hz
+        return math.ceil(2 * MIN_PERIODS / f) / 2 if f > 0 else 0.0
+
+    @property
+    def message(self) -> str:
+        need = self.window_needed_s
+        return (f"the drive at {self.drive_frequency_hz:.2f} Hz makes {self.periods:.1f} periods in the regime "
+                f"monitor's {self.window_s:g} s window, fewer than {MIN_PERIODS:g}: the window's leakage puts more "
+                f"than the distortion threshold into the harmonics, so a free beam may read as hitting"
+                + (f"; give --regime-window {need:g} or more" if need else ""))
+
+
+class SlowDriveWatch:
+    """Follows the windows' periods and says once (``update`` returns a ``SlowDrive``) when the drive has
+    stayed too slow for the window for ``SLOW_WINDOWS`` windows running (2 s at the 0.25 s hop): not while a
+    drive merely stops or starts. The live pipeline and a campaign's regimes use the same rule."""
+
+    def __init__(self, window_s: float):
+        self.window_s = window_s
+        self.said = False
+        self._run = 0  # consecutive windows with fewer than MIN_PERIODS periods
+
+    def update(self, windows: list[RegimeWindow]) -> SlowDrive | None:
+        found = None
+        for w in windows:
+            self._run = self._run + 1 if w.periods < MIN_PERIODS else 0
+            if self._run == SLOW_WINDOWS and found is None and not self.said:
+                found = SlowDrive(w.t_s, w.drive_frequency_hz, w.periods, self.window_s)
+        self.said = self.said or found is not None
+        return found
 
 
 @dataclass(frozen=True)
