@@ -154,7 +154,8 @@ def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(
         y[moves] = x
         m = y.size // 2
         out = poles.copy()
-        out[free] = (-np.exp(y[:m]) + 1j * np.exp(y[m:]))[free]
+        with np.errstate(over="ignore", invalid="ignore"):  # a step the solver tries can overflow: not admissible
+            out[free] = (-np.exp(y[:m]) + 1j * np.exp(y[m:]))[free]
         return out
 
     def resid(x):
