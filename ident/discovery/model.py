@@ -342,19 +342,37 @@ def force_response(model: LinearModel, h: np.ndarray, gains: list[np.ndarray], o
     return out
 
 
-def lstsq(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+class LeastSquares:
     """Least squares for tall, narrow systems: the normal equations of the column-scaled matrix by
     Cholesky (the columns of modal responses differ in scale by orders), a ridge of 1e-12 of the
     diagonal keeping them definite; falls back to SVD when they are not. Many times faster than SVD on
-    the 10^4 x 10^1 systems that pole fitting solves thousands of times."""
-    norms = np.sqrt(np.einsum("ij,ij->j", X, X))
-    norms = np.where(norms > 0, norms, 1.0)
-    Xs = X / norms
-    A = Xs.T @ Xs
-    A[np.diag_indices_from(A)] += 1e-12
-    try:
-        c = np.linalg.cholesky(A)
-        sol = np.linalg.solve(c.T, np.linalg.solve(c, Xs.T @ y))
-    except np.linalg.LinAlgError:
-        sol = np.linalg.lstsq(Xs, y, rcond=None)[0]
-    return sol / norms
+    the 10^4 x 10^1 systems that pole fitting solves thousands of times. The factorisation is made once
+    and kept for every right-hand side of the same matrix (the responses of one kinematic order share
+    their design matrix); each solve is the very arithmetic of a fresh one."""
+
+    def __init__(self, X: np.ndarray):
+        norms = np.sqrt(np.einsum("ij,ij->j", X, X))
+        self.norms = np.where(norms > 0, norms, 1.0)
+        self.Xs = X / self.norms
+        A = self.Xs.T @ self.Xs
+        A[np.diag_indices_from(A)] += 1e-12
+        try:
+            self.c = np.linalg.cholesky(A)
+        except np.linalg.LinAlgError:
+            self.c = None
+
+    def solve(self, y: np.ndarray) -> np.ndarray:
+        sol = None
+        if self.c is not None:
+            try:
+                sol = np.linalg.solve(self.c.T, np.linalg.solve(self.c, self.Xs.T @ y))
+            except np.linalg.LinAlgError:
+                sol = None
+        if sol is None:
+            sol = np.linalg.lstsq(self.Xs, y, rcond=None)[0]
+        return sol / self.norms
+
+
+def lstsq(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``LeastSquares(X).solve(y)``: one right-hand side."""
+    return LeastSquares(X).solve(y)

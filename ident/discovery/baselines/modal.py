@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..model import NUMERIC_FAILURES, Element, LinearModel, lstsq, mode_states, without_feedthrough
+from ..model import NUMERIC_FAILURES, Element, LeastSquares, LinearModel, mode_states, without_feedthrough
 from ..signals import ORDER, Prepared, convert, frf, miso_frf
 from ..split import rows_of
 from . import Baseline, Location, dominant_mode, element_force
@@ -80,16 +80,20 @@ def fit_residues(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements: 
     m = poles.size
     C = np.empty((len(prep.names), m), complex)
     fit = np.empty((rows.size if at is None else at.size, len(prep.names)))
+    design: dict[int, tuple] = {}  # per kinematic order: the design matrix, its factorisation, the forced part at ``at``
     for i, kind in enumerate(prep.kinds):
         o = ORDER[kind]
-        X = _design(poles, states[rows], drive[rows], rows / prep.fs_hz, o, _starts(prep))
+        if o not in design:
+            X = _design(poles, states[rows], drive[rows], rows / prep.fs_hz, o, _starts(prep))
+            forced = None if at is None else _design(poles, states[at], drive[at], at / prep.fs_hz, o)[:, :2 * m]
+            design[o] = X, LeastSquares(X), forced
+        X, ls, forced = design[o]
         y = prep.measured[rows, i] - (prep.base[rows, o] if prep.base_excited else 0.0)
-        sol = lstsq(X, y)
+        sol = ls.solve(y)
         C[i] = sol[:m] + 1j * sol[m:2 * m]
         if at is None:
             fit[:, i] = X @ sol + (prep.base[rows, o] if prep.base_excited else 0.0)
         else:
-            forced = _design(poles, states[at], drive[at], at / prep.fs_hz, o)[:, :2 * m]
             fit[:, i] = forced @ sol[:2 * m] + (prep.base[at, o] if prep.base_excited else 0.0)
     return C, fit
 
@@ -195,15 +199,19 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
         D = [np.empty((len(prep.names), m), complex) for _ in hb]
         fit = np.empty((sub.size, len(prep.names)))
         first = 2 * m * (2 + len(prep.blows))  # the forced and free responses' columns come first
+        design: dict[int, tuple] = {}  # per kinematic order: the design matrix and its factorisation
         for i, kind in enumerate(prep.kinds):
             o = ORDER[kind]
-            X = [_design(poles, states[0], drives[0], t, o, _starts(prep))]
-            X += [_design(poles, sq, dq, t, o)[:, :2 * m] for sq, dq in zip(states[1:], drives[1:])]
-            X = np.hstack(X)
+            if o not in design:
+                X = [_design(poles, states[0], drives[0], t, o, _starts(prep))]
+                X += [_design(poles, sq, dq, t, o)[:, :2 * m] for sq, dq in zip(states[1:], drives[1:])]
+                X = np.hstack(X)
+                if not np.all(np.isfinite(X)):
+                    raise ValueError("poles left the stable half-plane")
+                design[o] = X, LeastSquares(X)
+            X, ls = design[o]
             y = prep.measured[sub, i] - (prep.base[sub, o] if prep.base_excited else 0.0)
-            if not np.all(np.isfinite(X)):
-                raise ValueError("poles left the stable half-plane")
-            sol = lstsq(X, y)
+            sol = ls.solve(y)
             C[i] = sol[:m] + 1j * sol[m:2 * m]
             for j in range(len(hb)):
                 q = sol[first + 2 * m * j:first + 2 * m * (j + 1)]
