@@ -177,11 +177,13 @@ def _summary(rows: list[dict], key: str = "") -> str:
     ch = sum(r[f"{key}changes"] for r in rows)
     intime = sum(r[f"{key}in_time"] for r in rows)
     false = sum(r[f"{key}false"] for r in rows)
+    never = sum(r[f"{key}never_held"] for r in rows)
     steady_false = sum(r[f"{key}steady_false"] for r in rows)
     with_false = sum(1 for r in rows if r[f"{key}steady_false"] > 0)
     worst = min((r[f"{key}right"] / r[f"{key}windows"] for r in rows if r[f"{key}windows"]), default=float("nan"))
     steady_right = float(np.mean([r[f"{key}steady_right"] for r in rows]))
-    return (f"{100 * right / max(w, 1):5.1f} % ({100 * worst:5.1f} worst) | {intime:3d}/{ch:3d} | {false:3d} | "
+    return (f"{100 * right / max(w, 1):5.1f} % ({100 * worst:5.1f} worst) | {intime:3d}/{ch:3d} | {false:3d} "
+            f"({never:2d} never held) | "
             f"{steady_false:3d} in {with_false}/{len(rows)} seeds | {100 * steady_right:5.1f} %")
 
 
@@ -198,7 +200,7 @@ def run(args) -> int:
           f"windows of {args.regime_window:g} s" + (f", cases kept in {args.cache}" if args.cache else ""),
           flush=True)
     head = (" seed |   fs | stopper k/k_beam  side | mist | coup |  SNR | windows right | changes <= 1 s (max) "
-            "| false | steady regime false")
+            "| false (never held) | steady regime false")
     print(head)
     for seed in range(args.seed, args.seed + args.cases):
         t0 = time.perf_counter()
@@ -220,20 +222,23 @@ def run(args) -> int:
             row |= {f"{key}windows": sc.windows, f"{key}right": sc.windows_right,
                     f"{key}changes": len(sc.true_changes), f"{key}in_time": sc.changes_in_time,
                     f"{key}latency_max": max(sc.latencies_s, default=0.0), f"{key}false": sc.false_changes,
+                    f"{key}never_held": sc.false_never_held,
                     f"{key}steady_false": len(sch), f"{key}steady_right": ss.share_right,
                     f"{key}monitor_s": time.perf_counter() - t1}
         rows.append(row)
         print(f" {seed:4d} | {info['fs_hz']:4.0f} | {info['stiffness_ratio']:6.1f} {info['sides']:>13} | "
               f"{100 * info['mistuning']:3.0f}% | {100 * info['coupling']:3.1f}% | {info['snr_db']:4.1f} | "
               f"{100 * row['right'] / max(row['windows'], 1):5.1f} % of {row['windows']:3d} | "
-              f"{row['in_time']:2d}/{row['changes']:2d} ({row['latency_max']:5.2f} s) | {row['false']:5d} | "
+              f"{row['in_time']:2d}/{row['changes']:2d} ({row['latency_max']:5.2f} s) | {row['false']:5d} ({row['never_held']:2d})"
+              f"        | "
               f"{regime:>6} {row['steady_false']:3d} ({100 * row['steady_right']:5.1f} % right)"
               + (f" | with gaps: {100 * row['gap_right'] / max(row['gap_windows'], 1):5.1f} %, "
                  f"{row['gap_in_time']}/{row['gap_changes']}, steady {row['gap_steady_false']}"
                  if args.config_gaps else "") + f"   [{t_gen:.0f} s]", flush=True)
     print()
     print("range                        | windows right (worst seed) | changes <= 1 s | false changes in "
-          "regime runs | false changes in steady runs | steady windows right (mean over seeds)")
+          "regime runs (of them to a regime the truth held nowhere in the second before) | false changes in "
+          "steady runs | steady windows right (mean over seeds)")
     for title, key, bins in BINS:
         for b in bins:
             sel = [r for r in rows if _in_bin(r[key], b)]

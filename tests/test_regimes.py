@@ -288,6 +288,21 @@ def test_true_changes_ignore_flicker():
     assert tc[0].t_departure_s == pytest.approx(2.99) and tc[0].t_s == pytest.approx(3.40)
 
 
+def test_false_changes_are_split_by_whether_the_rig_held_the_regime():
+    """At 100 Hz: free for 3 s, beam 1 alone for 0.5 s (flicker, shorter than the 1 s a regime must last),
+    then both for 5 s: one true change, free -> both at 3.5 s (departing at 2.99 s). Reported: beam 1 at
+    3.2 s (false: no true change to it, but the rig held it in the second before), both at 4.0 s (the true
+    change, 0.5 s late), beam 2 at 6.0 s (false, and the rig was never there) and both again at 7.0 s
+    (false, held): three false changes, one never held."""
+    codes = np.array([0] * 300 + [1] * 50 + [3] * 500)
+    windows = np.arange(1, 35) * 0.25
+    labels = np.where(windows < 4.0, 0, 3)
+    sc = score_regimes(windows, labels, [(3.2, 1), (4.0, 3), (6.0, 2), (7.0, 3)], codes, 100.0)
+    assert [(c.previous, c.code) for c in sc.true_changes] == [(0, 3)]
+    assert sc.latencies_s == (pytest.approx(0.5),)
+    assert (sc.false_changes, sc.false_never_held, sc.reported_changes) == (3, 1, 4)
+
+
 def test_bad_config_and_input():
     with pytest.raises(ValueError, match="gap_m"):
         regime_start(RegimeConfig(gap_m=(1e-3, -1.0)))
