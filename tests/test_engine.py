@@ -1,6 +1,7 @@
 """The long benchmarks as Dask tasks (ident.cli.engine): the same output as the serial run, digit for digit,
 on small case sets; results in the order of the cases however the tasks finish."""
 
+import json
 import os
 import re
 import time
@@ -9,7 +10,9 @@ import dask
 import numpy as np
 
 from clitools import run_main
+from ident.cli.bench_discovery import rig_case
 from ident.cli.engine import dask_client, mapper, run_ordered
+from ident.discovery import discover, to_json
 from ident.cli.main import main as ident_main
 from ident.paper.duffing import DuffingParams, duffing_data, noise_sweeps
 
@@ -33,6 +36,33 @@ def test_bench_discovery_on_dask_prints_what_the_serial_run_prints(dask_schedule
     # both cases name their cause (Coulomb friction, a sensor gain): their parameter errors are compared too
     assert "coulomb_friction    parameter error median" in serial
     assert "sensor_gain         parameter error median" in serial
+
+
+def test_bench_discovery_saves_each_case_as_discover_answers_it(dask_scheduler, tmp_path):
+    """--save on Dask workers: one JSON line per case, read back with the standard json module, holding the
+    generator's truth, the verdict the bench printed, and every candidate as ``discover`` answers the same
+    case run here (cause, place, held-out gain); an existing file is refused and left as it was."""
+    out = tmp_path / "cases.jsonl"
+    argv = ["bench", "discovery", "--generator", "rig", "--cases", "2", "--seed", "10", "--duration", "3",
+            "--save", str(out), "--scheduler", dask_scheduler]
+    code, printed, err, tb = run_main(ident_main, argv)
+    assert code == 0 and tb is None, err
+    records = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [r["seed"] for r in records] == [10, 11] and not (tmp_path / "cases.jsonl.part").exists()
+    for r in records:
+        case = rig_case(r["seed"], 3.0)
+        assert r["truth"]["cause"] == case.cause and r["truth"]["location"] == case.location
+        line = next(x for x in printed.splitlines() if re.match(rf"case +{r['seed']} ", x))
+        assert line.split("->")[1].split()[0] == r["verdict"]["named"]
+        here = to_json(discover(case.measurement, rig=case.rig))
+        assert [(c["effect"], c["response"]) for c in r["discovery"]["candidates"]] == \
+            [(c["effect"], c["response"]) for c in here["candidates"]]
+        def gains(js):  # a diverged candidate's gain is written as null
+            return [np.nan if c["gain"] is None else c["gain"] for c in js["candidates"]]
+        np.testing.assert_allclose(gains(r["discovery"]), gains(here), rtol=1e-9)
+    before = out.read_bytes()
+    code, _, err, tb = run_main(ident_main, argv)
+    assert code == 2 and tb is None and "exists" in err and out.read_bytes() == before
 
 
 def test_duffing_noise_sweep_on_dask_equals_the_serial_sweep(dask_scheduler):

@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from daq.safeio import Output, check_outputs
 
 from ..derivatives import smooth
 from ..library import PolynomialForcingLibrary
@@ -50,6 +51,9 @@ def add_parser(sub) -> None:
     p.add_argument("--twins", action="store_true",
                    help="discovery (independent generator): also run each case without its effect: the findings "
                         "made where there is nothing, and each effect's share of the baseline's error")
+    p.add_argument("--save", type=Path, metavar="OUT.jsonl",
+                   help="discovery: also write each case's truth, verdict and discover's JSON (every candidate) as "
+                        "a line of OUT.jsonl, for studies without running the cases again (never replaces a file)")
     p.add_argument("--duration", type=DURATION, help=f"discovery: the rig generator's case length (default "
                                                        f"{RIG_CASE_S:g} s); batch: each recording's (default 8 s)")
     p.add_argument("--campaign", type=Path, help="batch: the campaign's folder (made there if missing or empty, "
@@ -93,14 +97,20 @@ def _pysindy_loop(x, xdot, t, f, lambdas, n_rows):
 
 
 def run(args) -> int:
+    if args.save is not None and args.what != "discovery":
+        raise ValueError("--save keeps the discovery benchmark's records; it is for ident bench discovery")
     if args.what == "discovery":
         if args.duration is not None and args.generator != "rig":
             raise ValueError("--duration sets the rig generator's case length; the independent generator's cases "
                              "have their own")
+        if args.save is not None:
+            if args.save.exists():
+                raise ValueError(f"--save {args.save} exists: give another name (a benchmark never replaces a file)")
+            check_outputs([Output("--save", args.save)], [], force=False)
         if args.twins and args.generator != "independent":
             raise ValueError("--twins needs the independent generator: daq.sim.hidden has no twins")
         return run_discovery(args.generator, args.cases, args.seed, args.workers, args.scheduler,
-                             args.duration or RIG_CASE_S, args.twins)
+                             args.duration or RIG_CASE_S, args.twins, args.save)
     if args.what == "batch":
         if args.scheduler or args.workers is not None:
             raise ValueError("ident bench batch compares 1 and 2 local workers itself; --scheduler and --workers "

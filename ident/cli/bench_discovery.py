@@ -18,18 +18,22 @@ finding.
 
 from __future__ import annotations
 
+import json
 import platform
 import time
 from collections import Counter
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numba
 import numpy as np
 import scipy
 from daq.sim.hidden import hidden_case
+from daq.safeio import PartFile, part_path
 from daq.sim.independent.cases import discovery_case
 
-from ..discovery import Channel, Measurement, discover
+from ..discovery import Channel, Measurement, discover, to_json
+from ..jsonsafe import finite
 from ..discovery.search import Settings, same_sensors
 from ..rig import RigParams
 from .engine import ordered, session
@@ -86,6 +90,7 @@ class Verdict:
     baseline_nrmse: float | None = None  # the baseline's held-out NRMSE
     twin: bool = False  # the case run without its effect (``independent_case(seed, twin=True)``)
     strength: float | None = None  # the case's effect strength (``Case.strength``)
+    record: dict | None = None  # with --save: the case's truth and discover's JSON (``saved_record``)
 
 
 RIG_CASE_S = 40.0  # the rig generator's case length
@@ -129,17 +134,34 @@ def judge(case: Case, d, seconds: float) -> Verdict:
                     for f in d.findings], float(d.baseline_test_nrmse), strength=case.strength)
 
 
-def run_case(args: tuple[str, int, float, bool]) -> Verdict:
-    """One case (a Dask task): (generator, seed, the rig generator's case length in s, twin)."""
-    generator, seed, duration_s, twin = args
+def run_case(args: tuple) -> Verdict:
+    """One case (a Dask task): (generator, seed, the rig generator's case length in s, twin[, keep]); with
+    ``keep`` the verdict carries the case's record for ``--save`` (``saved_record``)."""
+    generator, seed, duration_s, twin = args[:4]
+    keep = len(args) > 4 and bool(args[4])
     case = rig_case(seed, duration_s) if generator == "rig" else independent_case(seed, twin=twin)
     t0 = time.perf_counter()
     try:
         d = discover(case.measurement, rig=case.rig)
     except Exception as exc:  # noqa: BLE001 - a benchmark counts a crash as an error row and goes on
-        return Verdict(seed, case.family, SYNONYMS.get(case.cause, case.cause), f"error: {exc}", "", False, 0, None,
-                       None, time.perf_counter() - t0, case.info, twin=twin, strength=case.strength)
-    return replace(judge(case, d, time.perf_counter() - t0), twin=twin)
+        v = Verdict(seed, case.family, SYNONYMS.get(case.cause, case.cause), f"error: {exc}", "", False, 0, None,
+                    None, time.perf_counter() - t0, case.info, twin=twin, strength=case.strength)
+        return replace(v, record=saved_record(case, v, None)) if keep else v
+    v = replace(judge(case, d, time.perf_counter() - t0), twin=twin)
+    return replace(v, record=saved_record(case, v, d)) if keep else v
+
+
+def saved_record(case: Case, v: Verdict, d) -> dict:
+    """One line of ``--save``: the case (seed, twin, family, the generator's truth in this catalogue's names),
+    the verdict as printed, and ``discover``'s result in the shape ``ident discover --json`` writes (every
+    candidate with its held-out gain, p-value and parameters), so that misses can be studied and selection
+    rules tried without running the cases again. ``d`` is None where discover raised."""
+    verdict = {k: getattr(v, k) for k in ("named", "location", "right", "extra", "parameter_error", "gain",
+                                          "seconds", "baseline_nrmse")}
+    return finite({"seed": case.seed, "twin": v.twin, "family": case.family, "info": case.info,
+                   "truth": {"cause": case.cause, "location": case.location, "strength": case.strength,
+                             "parameters": case.truth, "clipped": sorted(case.clipped)},
+                   "verdict": verdict, "discovery": None if d is None else to_json(d)})
 
 
 def _joint_truth(eq: dict, effect: dict) -> dict:
@@ -300,19 +322,34 @@ def environment() -> str:
 
 
 def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: int | None = None,
-                  scheduler: str | None = None, duration_s: float = RIG_CASE_S, twins: bool = False) -> int:
+                  scheduler: str | None = None, duration_s: float = RIG_CASE_S, twins: bool = False,
+                  save: Path | None = None) -> int:
     """The benchmark: in this process, or on a local Dask cluster of ``workers`` processes, or on the
     cluster at ``scheduler``; the lines in seed order either way. ``twins``: each independent case is
-    also run without its effect (``twin_report``)."""
+    also run without its effect (``twin_report``). ``save``: a JSON-lines file, one ``saved_record`` per
+    case (and twin) in the printed order, streamed as ``NAME.part`` and renamed when the run completes (a
+    run cut short leaves the part, whole lines up to its last case); an existing file is never replaced."""
     t0 = time.perf_counter()
-    jobs = [(generator, s, duration_s, twin) for s in range(first_seed, first_seed + n_cases)
+    jobs = [(generator, s, duration_s, twin, save is not None) for s in range(first_seed, first_seed + n_cases)
             for twin in ((False, True) if twins else (False,))]
     verdicts = []
+    out = None
+    if save is not None:
+        if part_path(save).exists():
+            raise ValueError(f"--save: {part_path(save)} exists (a run cut short: whole lines up to its last "
+                             f"case); move it away or give another name")
+        out = PartFile(save, label="--save", mode="w")
     print(environment(), flush=True)
     with session(scheduler, workers) as client:
         for v in ordered(client, run_case, jobs, "discovery"):
+            if out is not None:
+                out.file.write(json.dumps(v.record) + "\n")
+                out.file.flush()
+                v = replace(v, record=None)
             verdicts.append(v)
             _print(v)
+    if out is not None:
+        print(f"saved {len(verdicts)} records to {out.commit()}")
     print()
     print(report([v for v in verdicts if not v.twin], time.perf_counter() - t0))
     if twins:
