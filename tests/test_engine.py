@@ -12,8 +12,8 @@ import numpy as np
 from clitools import run_main
 from ident.cli.bench_discovery import rig_case
 from ident.cli.engine import dask_client, mapper, run_ordered
-from ident.discovery import discover, to_json
 from ident.cli.main import main as ident_main
+from ident.discovery import discover, to_json
 from ident.paper.duffing import DuffingParams, duffing_data, noise_sweeps
 
 
@@ -38,6 +38,11 @@ def test_bench_discovery_on_dask_prints_what_the_serial_run_prints(dask_schedule
     assert "sensor_gain         parameter error median" in serial
 
 
+def _gains(js: dict) -> list[float]:
+    """The candidates' held-out gains of a discover JSON (a diverged candidate's is written as null)."""
+    return [np.nan if c["gain"] is None else c["gain"] for c in js["candidates"]]
+
+
 def test_bench_discovery_saves_each_case_as_discover_answers_it(dask_scheduler, tmp_path):
     """--save on Dask workers: one JSON line per case, read back with the standard json module, holding the
     generator's truth, the verdict the bench printed, and every candidate as ``discover`` answers the same
@@ -57,9 +62,7 @@ def test_bench_discovery_saves_each_case_as_discover_answers_it(dask_scheduler, 
         here = to_json(discover(case.measurement, rig=case.rig))
         assert [(c["effect"], c["response"]) for c in r["discovery"]["candidates"]] == \
             [(c["effect"], c["response"]) for c in here["candidates"]]
-        def gains(js):  # a diverged candidate's gain is written as null
-            return [np.nan if c["gain"] is None else c["gain"] for c in js["candidates"]]
-        np.testing.assert_allclose(gains(r["discovery"]), gains(here), rtol=1e-9)
+        np.testing.assert_allclose(_gains(r["discovery"]), _gains(here), rtol=1e-9)
     before = out.read_bytes()
     code, _, err, tb = run_main(ident_main, argv)
     assert code == 2 and tb is None and "exists" in err and out.read_bytes() == before

@@ -28,13 +28,13 @@ from pathlib import Path
 import numba
 import numpy as np
 import scipy
-from daq.sim.hidden import hidden_case
 from daq.safeio import PartFile, part_path
+from daq.sim.hidden import hidden_case
 from daq.sim.independent.cases import discovery_case
 
 from ..discovery import Channel, Measurement, discover, to_json
-from ..jsonsafe import finite
 from ..discovery.search import Settings, same_sensors
+from ..jsonsafe import finite
 from ..rig import RigParams
 from .engine import ordered, session
 
