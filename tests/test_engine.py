@@ -68,6 +68,21 @@ def test_bench_discovery_saves_each_case_as_discover_answers_it(dask_scheduler, 
     assert code == 2 and tb is None and "exists" in err and out.read_bytes() == before
 
 
+def test_bench_discovery_save_leaves_no_part_when_nothing_ran_and_keeps_a_cut_one(tmp_path):
+    """A run that fails before its first case (both --scheduler and --workers) leaves no OUT.jsonl.part to block
+    the corrected command; a part left by a run cut short is refused, not overwritten."""
+    out = tmp_path / "cases.jsonl"
+    argv = ["bench", "discovery", "--generator", "rig", "--cases", "1", "--duration", "3", "--save", str(out)]
+    code, _, err, tb = run_main(ident_main, [*argv, "--scheduler", "tcp://127.0.0.1:1", "--workers", "2"])
+    assert code == 2 and tb is None and "not both" in err
+    assert sorted(tmp_path.iterdir()) == []
+    part = tmp_path / "cases.jsonl.part"
+    part.write_text('{"seed": 0}\n')
+    code, _, err, tb = run_main(ident_main, argv)
+    assert code == 2 and tb is None and "cut short" in err
+    assert part.read_text() == '{"seed": 0}\n' and not out.exists()
+
+
 def test_duffing_noise_sweep_on_dask_equals_the_serial_sweep(dask_scheduler):
     data = duffing_data(DuffingParams(t_end=20.0))  # a short record keeps the four fits quick
     args = (data, (0.25,), 2, ("paper", "realistic"), 7)

@@ -289,18 +289,20 @@ def test_true_changes_ignore_flicker():
 
 
 def test_false_changes_are_split_by_whether_the_rig_held_the_regime():
-    """At 100 Hz: free for 3 s, beam 1 alone for 0.5 s (flicker, shorter than the 1 s a regime must last),
-    then both for 5 s: one true change, free -> both at 3.5 s (departing at 2.99 s). Reported: beam 1 at
-    3.2 s (false: no true change to it, but the rig held it in the second before), both at 4.0 s (the true
-    change, 0.5 s late), beam 2 at 6.0 s (false, and the rig was never there) and both again at 7.0 s
-    (false, held): three false changes, one never held."""
+    """At 100 Hz: free for 3 s, beam 1 alone for 0.5 s (samples 300-349: flicker, shorter than the 1 s a
+    regime must last), then both for 5 s: one true change, free -> both at 3.5 s (departing at 2.99 s), reported
+    at 4.0 s (0.5 s late). Six false reports, each judged on the samples its window's end covers, [t - 1 s, t):
+    beam 1 at 3.0 s (samples 200-299: never held, the rig got there one sample later), at 3.2 s (held), at
+    4.49 s (samples 349-448: held by sample 349 alone), at 5.0 s (400-499: never held, though the record holds
+    it elsewhere); beam 2 at 6.0 s (never anywhere); both at 7.0 s (held: a return to the rig's regime)."""
     codes = np.array([0] * 300 + [1] * 50 + [3] * 500)
     windows = np.arange(1, 35) * 0.25
     labels = np.where(windows < 4.0, 0, 3)
-    sc = score_regimes(windows, labels, [(3.2, 1), (4.0, 3), (6.0, 2), (7.0, 3)], codes, 100.0)
+    reports = [(3.0, 1), (3.2, 1), (4.0, 3), (4.49, 1), (5.0, 1), (6.0, 2), (7.0, 3)]
+    sc = score_regimes(windows, labels, reports, codes, 100.0)
     assert [(c.previous, c.code) for c in sc.true_changes] == [(0, 3)]
     assert sc.latencies_s == (pytest.approx(0.5),)
-    assert (sc.false_changes, sc.false_never_held, sc.reported_changes) == (3, 1, 4)
+    assert (sc.false_changes, sc.false_never_held, sc.reported_changes) == (6, 3, 7)
 
 
 def test_bad_config_and_input():

@@ -22,7 +22,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from daq.safeio import Output, check_outputs
 
 from ..derivatives import smooth
 from ..library import PolynomialForcingLibrary
@@ -103,10 +102,6 @@ def run(args) -> int:
         if args.duration is not None and args.generator != "rig":
             raise ValueError("--duration sets the rig generator's case length; the independent generator's cases "
                              "have their own")
-        if args.save is not None:
-            if args.save.exists():
-                raise ValueError(f"--save {args.save} exists: give another name (a benchmark never replaces a file)")
-            check_outputs([Output("--save", args.save)], [], force=False)
         if args.twins and args.generator != "independent":
             raise ValueError("--twins needs the independent generator: daq.sim.hidden has no twins")
         return run_discovery(args.generator, args.cases, args.seed, args.workers, args.scheduler,

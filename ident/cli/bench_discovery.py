@@ -333,21 +333,21 @@ def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: in
     jobs = [(generator, s, duration_s, twin, save is not None) for s in range(first_seed, first_seed + n_cases)
             for twin in ((False, True) if twins else (False,))]
     verdicts = []
-    out = None
-    if save is not None:
-        if part_path(save).exists():
-            raise ValueError(f"--save: {part_path(save)} exists (a run cut short: whole lines up to its last "
-                             f"case); move it away or give another name")
-        out = PartFile(save, label="--save", mode="w")
+    out = _saving(save) if save is not None else None
     print(environment(), flush=True)
-    with session(scheduler, workers) as client:
-        for v in ordered(client, run_case, jobs, "discovery"):
-            if out is not None:
-                out.file.write(json.dumps(v.record) + "\n")
-                out.file.flush()
-                v = replace(v, record=None)
-            verdicts.append(v)
-            _print(v)
+    try:
+        with session(scheduler, workers) as client:
+            for v in ordered(client, run_case, jobs, "discovery"):
+                if out is not None:
+                    out.file.write(json.dumps(v.record) + "\n")
+                    out.file.flush()
+                    v = replace(v, record=None)
+                verdicts.append(v)
+                _print(v)
+    except BaseException:
+        if out is not None and not verdicts:  # nothing saved yet (no scheduler, say): no part left to block a rerun
+            out.abort()
+        raise
     if out is not None:
         print(f"saved {len(verdicts)} records to {out.commit()}")
     print()
@@ -355,6 +355,17 @@ def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: in
     if twins:
         print(twin_report(verdicts))
     return 0
+
+
+def _saving(save: Path) -> PartFile:
+    """The ``--save`` stream, refused with one line if the file or its part exists (a benchmark never replaces a
+    file, and a part is a run cut short whose whole lines are worth keeping)."""
+    for path, what in ((save, "give another name (a benchmark never replaces a file)"),
+                       (part_path(save), "a run cut short, whole lines up to its last case: move it away or give "
+                                         "another name")):
+        if path.exists() or path.is_symlink():
+            raise ValueError(f"--save: {path} exists: {what}")
+    return PartFile(save, label="--save", mode="w", check=False)
 
 
 def _print(v: Verdict) -> None:

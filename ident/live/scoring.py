@@ -16,10 +16,12 @@ time t_c is that start; the old regime's last sample t_d (t_d <= t_c) opens the 
 - **false changes**: reported changes that belong to no true change (a reported change
   belongs to a true change when it reports the change's new regime within
   [t_d, t_c + ``settle_s``]); of them, **never held**: those whose new regime the raw
-  truth (flicker included) held at no sample of the ``settle_s`` before the report. The rest
-  report a regime the rig really passed through, for less than ``min_run_s`` (one beam leaving
-  its stopper a few periods before the other): a monitor that reports sooner reports more of
-  them, so the split tells a faster monitor from a more erratic one.
+  truth (flicker included) held at no sample of the ``settle_s`` before the report, the
+  samples its window's end covers (t_r - ``settle_s`` <= k / fs < t_r). The others report a
+  regime the rig held at some sample of that second: most often a brief intermediate regime
+  shorter than ``min_run_s`` (one beam leaving its stopper a few periods before the other),
+  which a monitor that reports sooner reports more of, or a return to the regime the rig is in
+  after a false change away from it.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ class RegimeScore:
     latencies_s: tuple[float, ...]  # per true change (inf: never reported)
     false_changes: int
     reported_changes: int
-    false_never_held: int = 0  # false changes to a regime the raw truth held nowhere in the settle_s before
+    false_never_held: int = 0  # false changes to a regime the raw truth held at no sample of the settle_s before
 
     @property
     def share_right(self) -> float:
@@ -94,7 +96,7 @@ def score_regimes(window_t_s: np.ndarray, window_codes: np.ndarray, changes: lis
     for tr, code in changes:
         if not any(c.t_departure_s <= tr <= c.t_s + settle_s and code == c.code for c in tcs):
             false += 1
-            lo = max(0, int(np.ceil((tr - settle_s) * fs_hz)))
-            hi = min(len(truth), int(np.floor(tr * fs_hz)) + 1)
+            end = int(round(tr * fs_hz))  # the report's window ends with sample end - 1 (as ``idx`` above)
+            lo, hi = max(0, end - int(round(settle_s * fs_hz))), min(len(truth), end)
             never += int(not np.any(truth[lo:hi] == code))
     return RegimeScore(int(keep.sum()), right, tuple(tcs), tuple(latencies), false, len(changes), never)
