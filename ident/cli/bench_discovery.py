@@ -134,20 +134,19 @@ def judge(case: Case, d, seconds: float) -> Verdict:
                     for f in d.findings], float(d.baseline_test_nrmse), strength=case.strength)
 
 
-def run_case(args: tuple) -> Verdict:
-    """One case (a Dask task): (generator, seed, the rig generator's case length in s, twin[, keep]); with
+def run_case(args: tuple[str, int, float, bool, bool]) -> Verdict:
+    """One case (a Dask task): (generator, seed, the rig generator's case length in s, twin, keep); with
     ``keep`` the verdict carries the case's record for ``--save`` (``saved_record``)."""
-    generator, seed, duration_s, twin = args[:4]
-    keep = len(args) > 4 and bool(args[4])
+    generator, seed, duration_s, twin, keep = args
     case = rig_case(seed, duration_s) if generator == "rig" else independent_case(seed, twin=twin)
     t0 = time.perf_counter()
     try:
         d = discover(case.measurement, rig=case.rig)
     except Exception as exc:  # noqa: BLE001 - a benchmark counts a crash as an error row and goes on
-        v = Verdict(seed, case.family, SYNONYMS.get(case.cause, case.cause), f"error: {exc}", "", False, 0, None,
-                    None, time.perf_counter() - t0, case.info, twin=twin, strength=case.strength)
-        return replace(v, record=saved_record(case, v, None)) if keep else v
-    v = replace(judge(case, d, time.perf_counter() - t0), twin=twin)
+        d, v = None, Verdict(seed, case.family, SYNONYMS.get(case.cause, case.cause), f"error: {exc}", "", False, 0,
+                             None, None, time.perf_counter() - t0, case.info, twin=twin, strength=case.strength)
+    else:
+        v = replace(judge(case, d, time.perf_counter() - t0), twin=twin)
     return replace(v, record=saved_record(case, v, d)) if keep else v
 
 
