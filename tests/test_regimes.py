@@ -12,7 +12,7 @@ from daq.sim.sensors import to_counts
 from ident.live.pipeline import Pipeline, PipelineConfig
 from ident.live.regimes import (CROSS_BAND, CROSS_MARGIN, CROSS_MIN_WINDOWS, CROSS_QUANTILE, LABELS, MIN_PERIODS,
                                 PHASE_REFERENCE, PHASE_Z, SLOW_WINDOWS, Decision, RegimeConfig, RegimeMonitor, _cross_talk,
-                                _gap_evidence, _half_phasors, _in_phase, _own_contact, decide, label_of,
+                                _clipping, _gap_evidence, _half_phasors, _in_phase, _own_contact, decide, label_of,
                                 regime_start, regime_step, spectral_features)
 from ident.live.scoring import score_regimes, true_changes
 
@@ -353,16 +353,20 @@ def test_the_gap_says_nothing_between_the_free_and_the_hitting_amplitudes():
 
 def two_tips(seconds, own1, c=4e-3, f=40.0, fs=FS, seed=0, own=9.0, own_deg=90.0):
     """Base, tip 1, tip 2 [m/s^2]: a sine drive; tip 2 hits (its odd harmonics a tenth of its fundamental's
-    power); tip 1 carries the coupling's share c of tip 2's harmonic power in anti-phase (a free beam pulled
-    through a spring above its first mode answers as a mass) and, from own1 on, harmonics of its own of
-    ``own`` c of that power, ``own_deg`` degrees from tip 2's (90: the phase says nothing; 0: a contact)."""
+    power, in the phase a stopper gives them: -sin 3 theta + sin 5 theta on a fundamental sin theta, the
+    series of pulses at the acceleration's extremes); tip 1 carries the coupling's share c of tip 2's harmonic
+    power in anti-phase (a free beam pulled through a spring above its first mode answers as a mass) and, from
+    own1 on, harmonics of its own of ``own`` c of that power, ``own_deg`` degrees from tip 2's (90: the phase
+    says nothing; 0: a contact)."""
     t = np.arange(int(seconds * fs)) / fs
     w = 2 * np.pi * f
     base = np.sin(w * t)
-    fund = 20 * np.sin(w * t - np.radians(100))  # lags the base: a passive beam above resonance
+    theta = w * t - np.radians(100)  # lags the base: a passive beam above resonance
+    fund = 20 * np.sin(theta)
 
     def harm(deg):  # two harmonics: 0.1 of the fundamental's power
-        return np.sqrt(0.1 / 2) * 20 * (np.sin(3 * w * t + np.radians(deg)) + np.sin(5 * w * t + np.radians(deg)))
+        d = np.radians(deg)
+        return np.sqrt(0.1 / 2) * 20 * (-np.sin(3 * theta + d) + np.sin(5 * theta + d))
 
     tip1 = fund - np.sqrt(c) * harm(0.0) + np.where(t < own1, 0.0, np.sqrt(own * c)) * harm(own_deg)
     noise = np.random.default_rng(seed).normal(0, 1e-3, (len(t), 3))
@@ -427,6 +431,44 @@ def test_the_in_phase_component_and_its_noise():
     assert PHASE_Z * np.sqrt(0.02) < 2.0 and _own_contact(((1.0, 0.01), (1.0, 0.01)))  # 2 against 4 x 0.14
     assert not _own_contact(((0.1, 0.01), (0.1, 0.01), (0.1, 0.01)))
     assert not _own_contact(((0.0, 0.0),))
+
+
+@pytest.mark.parametrize("sides", ["both", "one"])
+def test_a_stoppers_third_harmonic_lies_in_the_clipping_phase_of_the_fundamental(sides):
+    """_clipping on a beam's relative acceleration on a stiff stopper (the spring's force k (z - g) beyond the gap on
+    one side or both, z = cos theta): the component is the waveform's third Fourier coefficient in the direction of
+    the fundamental's cube, computed here by quadrature on the unshifted waveform, whatever phase the motion has
+    against the window (the phasors from the monitor's own spectral features); a third harmonic in anti-phase (a
+    free beam answering the coupling as a mass) is negative; a fundamental alone gives nothing."""
+    fs, f, k, g = 2000.0, 10.0, 40.0, 0.8
+    theta = np.linspace(0.0, 2 * np.pi, 4096, endpoint=False)
+
+    def rel_acc(th):  # z = cos th: a = -z w^2 - k (z - g)+ [- k (z + g)- on both sides], per w^2
+        z = np.cos(th)
+        push = np.where(z > g, z - g, 0.0) + (np.where(z < -g, z + g, 0.0) if sides == "both" else 0.0)
+        return -z - k * push
+
+    a = rel_acc(theta)
+    a1 = 2 * np.mean(a * np.cos(theta))  # both negative: the fundamental and the stopper's pulses at the peaks
+    a3 = 2 * np.mean(a * np.cos(3 * theta))
+    assert a1 < 0 and a3 < 0  # even in theta: no sine terms
+    assert np.allclose([np.mean(a * np.sin(theta)), np.mean(a * np.sin(3 * theta))], 0, atol=1e-12)
+    t = np.arange(int(2.0 * fs)) / fs
+    for phase in (0.0, 1.0, 2.5):
+        tip = rel_acc(2 * np.pi * f * t + phase)
+        x = np.column_stack([np.zeros_like(t), tip, np.zeros_like(t)])
+        x[:, 0] = 1e-3 * np.sin(2 * np.pi * f * t)  # a base that sets the drive frequency, far below the tip
+        sp = spectral_features(x, fs)
+        h = sp.harmonics.copy()
+        h[:, 0] = 0.0  # the base's own phasors removed: the tip's relative motion is the tip's here
+        c, v = _clipping(h, (1, 1), 0, [1.0, 1.0, 1.0], sp.phasor_scale)
+        scale = abs(h[0, 1]) / abs(a1)  # the phasors' normalisation
+        assert c == pytest.approx(abs(a3) * scale, rel=1e-3)
+        assert v == pytest.approx(0.5 * sp.phasor_scale, rel=1e-12)
+        h[2, 1] = -h[2, 1]  # the same harmonic in anti-phase
+        assert _clipping(h, (1, 1), 0, [1.0, 1.0, 1.0], sp.phasor_scale)[0] == pytest.approx(-c, rel=1e-12)
+        h[2, 1] = 0.0
+        assert _clipping(h, (1, 1), 0, [1.0, 1.0, 1.0], sp.phasor_scale)[0] == 0.0
 
 
 def test_the_envelope_is_the_change_of_amplitude_between_the_window_halves():
