@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.io import savemat
 
 from clitools import run_main
 from daq.cli import main as daq_main
@@ -109,3 +110,20 @@ def test_info_on_an_empty_recording(tmp_path):
     assert code == 0 and tb is None, err
     assert "samples    0" in out and "nan" not in out.lower()
     assert "duration   - (fewer than two samples)" in out and "rate       - (fewer than two samples)" in out
+
+
+def test_a_mat_file_that_is_missing_junk_or_cut_short_is_refused_in_one_line(tmp_path):
+    """Each gets exit code 2, one line that names the file and says what is wrong, and no traceback; the
+    F-16 files are MAT files, so this is the first thing a user of the field's data meets."""
+    junk = tmp_path / "junk.mat"
+    junk.write_bytes(bytes(range(256)) * 8)
+    whole = tmp_path / "whole.mat"
+    savemat(whole, {"Force": np.ones(4000), "Acceleration": np.ones((3, 4000)), "Fs": 400.0})
+    cut = tmp_path / "cut.mat"
+    cut.write_bytes(whole.read_bytes()[:5000])
+    for path, match in ((tmp_path / "missing.mat", "no such file"), (junk, "not a readable MAT file"),
+                        (cut, "not a readable MAT file")):
+        code, out, err, tb = run_main(ident_main, ["discover", path, "--excitation", "Force:force",
+                                                   "--response", "Acceleration2"])
+        assert code == 2 and tb is None and len(err.strip().splitlines()) == 1, (path, err)
+        assert str(path) in err and match in err, err

@@ -21,6 +21,8 @@ SUFFIXES = (".mat",)
 
 
 def _signals(path: Path) -> tuple[dict[str, np.ndarray], dict]:
+    if not Path(path).is_file():  # scipy 1.17's loadmat says "Reader needs file name" for a missing path
+        raise ValueError(f"{path}: no such file")
     try:
         mat = loadmat(path)
     except FileNotFoundError:
