@@ -5,7 +5,10 @@ model); the independent generator's cases are in ``test_discovery_independent.py
 (``ident bench discovery``) runs many more seeds of each.
 """
 
+import io
 import json
+import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -16,6 +19,7 @@ import pytest
 
 from daq.sim.hidden import hidden_case
 from ident.cli.bench_discovery import Case, Verdict, by_strength, judge, report, twin_report
+from ident.cli.discover import stage_printer
 from ident.discovery import Channel, Measurement, discover
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CUBIC, law_parameters
@@ -67,8 +71,17 @@ def test_a_clipping_in_a_sweep_is_tested_on_every_block():
     fitted, so every block tests it."""
     c = hidden_case(20, fs_hz=1000.0)
     assert c.effect == "clipping" and c.excitation == "sweep"
-    d = discover(_rig_measurement(c), rig=c.nominal)
+    stages: list[str] = []
+    d = discover(_rig_measurement(c), rig=c.nominal, progress=stages.append)
     assert [(f.cause, f.location) for f in d.findings] == [("clipping", "tip2")], d.verdict()
+    # the stage lines say what the result holds: the record's size, the baseline's modes and error, each
+    # refinement, the number scored
+    assert stages[0].startswith(f"{len(c.values)} samples at 1000 Hz, 2 responses"), stages
+    assert stages[1].startswith(f"baseline: rig model with {len(d.baseline.model.frequencies_hz)} modes"), stages
+    assert f"held-out NRMSE {d.baseline_test_nrmse:.4g} over {len(d.split.test)} blocks" in stages[1]
+    refining = [s for s in stages if s.startswith("refining ")]
+    assert len(refining) == sum(x.refined for x in d.candidates) > 0
+    assert stages[-1] == f"scoring {len(d.candidates)} candidates on the held-out blocks"
     assert d.findings[0].parameters["range"] == pytest.approx(c.truth["range_m_per_s2"], rel=1e-9)
     assert d.findings[0].p_value < 0.05 and d.findings[0].gain > 0.03
 
@@ -107,10 +120,37 @@ def _ident(*args, timeout=600):
 
 
 def test_own_example_recording_with_its_own_config_says_nothing_found(tmp_path):
-    # localized-1: a hammer blow puts beam 1 on its stoppers; the config's model knows the stoppers
-    out = _ident("discover", "recordings/localized-1.mcap", "--model", "recordings/localized-1.yaml",
-                 "--json", tmp_path / "d.json", "--report", tmp_path / "report")
-    assert out.returncode == 0, out.stderr
+    """localized-1: a hammer blow puts beam 1 on its stoppers; the config's model knows the stoppers. Run with
+    its stderr on a terminal (a real pty), where the stages are printed with their times; stdout, piped,
+    holds the answer alone."""
+    master, slave = os.openpty()
+    try:
+        out = subprocess.run([sys.executable, "-m", "ident", "discover", "recordings/localized-1.mcap", "--model",
+                              "recordings/localized-1.yaml", "--json", tmp_path / "d.json", "--report",
+                              tmp_path / "report"], stdout=subprocess.PIPE, stderr=slave, text=True, timeout=600,
+                             cwd=ROOT)
+        os.close(slave)
+        slave = -1
+        term = b""
+        while True:
+            try:
+                chunk = os.read(master, 4096)
+            except OSError:  # EIO: the terminal's other end is closed and everything read
+                break
+            if not chunk:
+                break
+            term += chunk
+    finally:
+        os.close(master)
+        if slave >= 0:
+            os.close(slave)
+    assert out.returncode == 0, term
+    lines = term.decode().splitlines()
+    assert re.fullmatch(r"\[ +\d+\.\d s\] 20000 samples at 2000 Hz, 2 responses; the rig model is the baseline",
+                        lines[0]), lines
+    assert any("] refining 1 of " in line for line in lines) and "] scoring " in lines[-1], lines
+    assert not re.search(r"^\[ *\d+\.\d s\]", out.stdout, re.M)  # stdout is piped: no stages there
+    assert stage_printer(io.StringIO()) is None  # ... nor on any stream that is not a terminal
     assert "nothing found" in out.stdout
     js = json.loads((tmp_path / "d.json").read_text())
     for key in ("baseline", "extended", "gain", "findings", "candidates", "split", "residual_rms", "band_hz"):

@@ -12,6 +12,9 @@ repeated; defaults are the rig's base, tip1 and tip2 accelerations. START:STOP a
 from __future__ import annotations
 
 import json
+import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib
@@ -105,7 +108,7 @@ def run(args) -> int:
         raise ValueError("--fit-data fits a modal baseline; with --model the baseline is the config's rig model")
     rig = load_model(args.model) if args.model else None
     train, test = parse_split(args.train, args.test, m.n)
-    d = discover(m, rig=rig, fit_data=fit, train=train, test=test)
+    d = discover(m, rig=rig, fit_data=fit, train=train, test=test, progress=stage_printer(sys.stderr))
     print(summary(d))
     if args.json:
         with safe_output(args.json, inputs=inputs, force=args.force, label="--json") as tmp:
@@ -115,6 +118,15 @@ def run(args) -> int:
             write_report(d, folder)
         print(f"report: {args.report}/report.md")
     return 0
+
+
+def stage_printer(stream) -> Callable[[str], None] | None:
+    """Stage lines with the seconds since the start, on a terminal only: piped or redirected, stderr stays
+    for errors (one line, exit code 2) and stdout for the answer."""
+    if not stream.isatty():
+        return None
+    t0 = time.monotonic()
+    return lambda line: print(f"[{time.monotonic() - t0:6.1f} s] {line}", file=stream, flush=True)
 
 
 def summary(d: Discovery) -> str:

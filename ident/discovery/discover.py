@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -116,21 +117,29 @@ def _split(prep: Prepared, train: slice | None = None, test: slice | None = None
 
 
 def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurement | None = None,
-             train: slice | None = None, test: slice | None = None, settings: Settings = Settings()) -> Discovery:
+             train: slice | None = None, test: slice | None = None, settings: Settings = Settings(),
+             progress: Callable[[str], None] | None = None) -> Discovery:
     """What the baseline (the rig model ``rig``, or a modal model fitted to the data or to ``fit_data``)
     gets wrong in ``m``, its cause, and the gain of the extended model on held-out blocks.
+
+    ``progress``, if given, is called with one line at each stage (the baseline, the search's size, each
+    refinement, the scoring): a record with many sensors takes minutes, and a person at a terminal should
+    see which stage it is in (``ident discover`` prints them there).
 
     The linear algebra runs on one BLAS thread: the fits and the refinements follow round-off, so with
     several threads the same record could give another answer (independent seed 73: a cubic with one
     thread, nothing with two); with one, ``ident discover``, the tests and the benchmark's Dask tasks
     agree."""
     with threadpool_limits(limits=1, user_api="blas"):
-        return _discover(m, rig, fit_data, train, test, settings)
+        return _discover(m, rig, fit_data, train, test, settings, progress or (lambda line: None))
 
 
 def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | None, train: slice | None,
-              test: slice | None, settings: Settings) -> Discovery:
+              test: slice | None, settings: Settings, say: Callable[[str], None]) -> Discovery:
     notes: list[str] = []
+    say(f"{m.n} samples at {m.fs_hz:g} Hz, {len(m.responses)} responses; "
+        + ("the rig model is the baseline" if rig is not None else "fitting a modal baseline, its order on held-out"
+           " blocks"))
     if rig is not None:
         baseline: Baseline = RigBaseline(rig)
         band = modal_band(baseline.model.frequencies_hz, m.fs_hz, m.n)
@@ -188,6 +197,9 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     piece = max(16, int(PIECE_PERIODS * prep.fs_hz / f_min))
     e0, n0 = block_errors(baseline, baseline.model, prep, split.test, warm, scale, (), bound, piece)
     sc = Scoring(scale, e0, n0, warm, bound, piece)
+    kind = "rig model" if rig is not None else "modal model"
+    say(f"baseline: {kind} with {len(baseline.model.frequencies_hz)} modes, band {prep.band[0]:.3g}-"
+        f"{prep.band[1]:.3g} Hz, held-out NRMSE {n0:.4g} over {len(split.test)} blocks")
 
     residual = baseline_residual(baseline, prep, split, warm)
     train_rows = split.rows("train")
@@ -196,6 +208,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     locations = baseline.locations(prep)
     char = characterise(baseline, prep, train_rows, residual, locations, scale)
     ranked = sorted(locations, key=lambda loc: -char[loc.name]["explained"])[:settings.max_locations]
+    say(f"characterised {len(locations)} locations; regressing every cause at the {len(ranked)} that explain most")
 
     # regression of every cause at every location
     cands: list[Candidate] = []
@@ -234,12 +247,15 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     by_loc = {loc.name: loc for loc in locations}
     fit_record = None if fit_data is None else (prep_fit, (slice(prep_fit.edge, prep_fit.n - prep_fit.edge),))
     refined = []
-    for c in _leaders(cands, baseline, by_loc, prep, split, warm, scale, bound, settings):
+    leaders = _leaders(cands, baseline, by_loc, prep, split, warm, scale, bound, settings)
+    for k, c in enumerate(leaders, start=1):
+        say(f"refining {k} of {len(leaders)} by simulation: {c.label}")
         try:
             refined.append(refine(c, baseline, by_loc[c.location], prep, split, warm, scale, bound, settings,
                                   joint=joint, fit=fit_record))
         except NUMERIC_FAILURES as exc:
             notes.append(f"{c.label}: refinement failed ({exc})")
+    say(f"scoring {len(cands) + len(refined)} candidates on the held-out blocks")
     scored = [score(c, baseline, prep, split, sc) for c in cands + refined]
     scored.sort(key=lambda c: -c.gain if np.isfinite(c.gain) else np.inf)
     for c in scored:
@@ -248,6 +264,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
 
     # fit data: a cause must hold at the other level too (not spoil the baseline's fit there)
     if fit_data is not None:
+        say("checking the significant ones at the fit record's level")
         scored = _hold_at_fit_level(scored, baseline, prep_fit, warm, f_min, settings)
 
     sel = _select(findable(scored, fitted_here=rig is None and fit_data is None), baseline, prep, split, sc,
