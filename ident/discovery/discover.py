@@ -147,6 +147,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     else:
         band, poles0 = _fit_modal(m, fit_data, train, test)
         prep = prepare(m, band)
+        say(f"first fit: {poles0.size} lightly damped modes, band {band[0]:.3g}-{band[1]:.3g} Hz; fitting there again")
     f_min = float(prep.band[0]) / 0.4
     split = _split(prep, train, test)
     if rig is None:
