@@ -132,7 +132,8 @@ def stage_printer(stream) -> Callable[[str], None] | None:
 def summary(d: Discovery) -> str:
     model = d.baseline.model
     modes = ", ".join(f"{f:.3g} Hz" for f in model.frequencies_hz)
-    lines = [f"baseline: {d.baseline.label} ({model.poles.size} modes: {modes}); band {d.prep.band[0]:.3g}-"
+    count = f"{model.poles.size} mode{'' if model.poles.size == 1 else 's'}"
+    lines = [f"baseline: {d.baseline.label} ({count}: {modes}); band {d.prep.band[0]:.3g}-"
              f"{d.prep.band[1]:.3g} Hz; held-out NRMSE {d.baseline_test_nrmse:.4f}"]
     lines += [f"  {n}" for n in d.prep.sign_notes if not n.startswith("signs: kept")]
     lines.append(d.verdict())

@@ -147,7 +147,8 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     else:
         band, poles0 = _fit_modal(m, fit_data, train, test)
         prep = prepare(m, band)
-        say(f"first fit: {poles0.size} lightly damped modes, band {band[0]:.3g}-{band[1]:.3g} Hz; fitting there again")
+        say(f"first fit: {poles0.size} lightly damped mode{'' if poles0.size == 1 else 's'}, band {band[0]:.3g}-"
+            f"{band[1]:.3g} Hz; fitting there again")
     f_min = float(prep.band[0]) / 0.4
     split = _split(prep, train, test)
     if rig is None:
@@ -199,7 +200,8 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     e0, n0 = block_errors(baseline, baseline.model, prep, split.test, warm, scale, (), bound, piece)
     sc = Scoring(scale, e0, n0, warm, bound, piece)
     kind = "rig model" if rig is not None else "modal model"
-    say(f"baseline: {kind} with {len(baseline.model.frequencies_hz)} modes, band {prep.band[0]:.3g}-"
+    k = len(baseline.model.frequencies_hz)
+    say(f"baseline: {kind} with {k} mode{'' if k == 1 else 's'}, band {prep.band[0]:.3g}-"
         f"{prep.band[1]:.3g} Hz, held-out NRMSE {n0:.4g} over {len(split.test)} blocks")
 
     residual = baseline_residual(baseline, prep, split, warm)
@@ -282,6 +284,9 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         sel = Selection(sel.findings + offsets, sel.ambiguous + [[] for _ in offsets],
                         [] if offsets and not sel.findings else sel.reasons)
     notes = sel.reasons + notes
+    if n0 > 1.0:  # NRMSE 1 is predicting zero
+        notes.append(f"the baseline predicts the held-out blocks worse than predicting zero (NRMSE {n0:.3g}): its "
+                     "linear part does not describe this record, and every gain here is measured against it")
     return Discovery(baseline, n0, e0, ext_model, ext_out, ext_err, ext_blocks, sel.findings, sel.ambiguous, scored,
                      split, prep, warm, [t / prep.fs_hz for t in onsets], resid_rms, char, notes)
 
