@@ -121,8 +121,10 @@ def test_a_mat_file_that_is_missing_junk_or_cut_short_is_refused_in_one_line(tmp
     savemat(whole, {"Force": np.ones(4000), "Acceleration": np.ones((3, 4000)), "Fs": 400.0})
     cut = tmp_path / "cut.mat"
     cut.write_bytes(whole.read_bytes()[:5000])
+    folder = tmp_path / "folder.mat"
+    folder.mkdir()
     for path, match in ((tmp_path / "missing.mat", "no such file"), (junk, "not a readable MAT file"),
-                        (cut, "not a readable MAT file")):
+                        (cut, "not a readable MAT file"), (folder, "is a folder")):
         code, out, err, tb = run_main(ident_main, ["discover", path, "--excitation", "Force:force",
                                                    "--response", "Acceleration2"])
         assert code == 2 and tb is None and len(err.strip().splitlines()) == 1, (path, err)

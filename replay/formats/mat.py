@@ -21,12 +21,13 @@ SUFFIXES = (".mat",)
 
 
 def _signals(path: Path) -> tuple[dict[str, np.ndarray], dict]:
-    if not Path(path).is_file():  # scipy 1.17's loadmat says "Reader needs file name" for a missing path
+    # checked first: scipy 1.17's loadmat says "Reader needs file name" for a missing path or a folder
+    if Path(path).is_dir():
+        raise ValueError(f"{path}: is a folder; give a MAT file")
+    if not Path(path).exists():
         raise ValueError(f"{path}: no such file")
     try:
         mat = loadmat(path)
-    except FileNotFoundError:
-        raise ValueError(f"{path}: no such file") from None
     except (ValueError, TypeError, OSError, NotImplementedError, KeyError, IndexError, MemoryError) as exc:
         raise ValueError(f"{path}: not a readable MAT file ({str(exc)[:80]})") from None
     signals: dict[str, np.ndarray] = {}
