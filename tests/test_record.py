@@ -83,7 +83,9 @@ def test_models_are_stamped_with_their_data_time(ten_seconds):
     for m, (log_ns, pub_ns) in zip(rec.models, msgs):
         k = int(round(m["t"] * 2000)) - 1  # the window's last sample
         assert log_ns == rec.log_time_ns[k]
-        assert pub_ns >= log_ns
+        # computed after its data arrived: log_time is the device timeline anchored to the host clock at the
+        # first read, so it may lead the host clock by that read's jitter (a fraction of a millisecond seen)
+        assert pub_ns >= log_ns - 5_000_000
         assert set(m["coefficient_std"]["v'"]) >= set(m["coefficients"]["v'"])
         assert all(0 <= p <= 1 for eq in m["inclusion_probability"].values() for p in eq.values())
         assert m["amplitude_m"] > 0 and m["natural_frequency_hz"] > 0
