@@ -6,11 +6,16 @@ code), so the data are not the method's own: x'' + 2 zeta w x' + w^2 x + k3 x^3 
 with 1 % white noise, the force random and low-passed at 150 Hz, the cubic worth 0.3 w^2 x at the linear
 response's RMS."""
 
+import re
+
 import numpy as np
 import pytest
 from scipy import signal
 
-from ident.discovery import Channel, Measurement, discover
+from clitools import run_main
+from ident.cli.main import main as ident_main
+from ident.discovery import Channel, Measurement, Settings, discover
+from ident.discovery.signals import within_budget
 
 FS = 20000.0
 W, ZETA = 2 * np.pi * 20.0, 0.02
@@ -62,3 +67,53 @@ def test_a_20_khz_record_and_its_2_khz_decimation_name_the_same_cubic(answers):
     # and it is the integrated oscillator's within 25 % (1.15 x measured: the fitted linear part is the
     # record's, 23.2 Hz where the oscillator's small-amplitude mode is 20 Hz, see the README)
     assert coefficient[1] == pytest.approx(k3, rel=0.25)
+
+
+def test_a_record_over_the_memory_budget_is_decimated_and_names_the_same_cubic(answers, tmp_path):
+    """The 20 kHz record against a budget of 50,000 samples x responses (200,000 here): decimated to fit,
+    the rate chosen from where the responses carry power, and the same cubic within 1 % of the full-rate
+    coefficient; the note says what was done. Through the command, training and test samples that fit
+    only once decimated and cut are analysed on that span, and a span that does not fit is refused in
+    one line."""
+    out, k3 = answers
+    u, x, _ = _duffing()
+    m = Measurement(FS, Channel("force", "force", u), (Channel("x", "displacement", x),))
+    d = discover(m, settings=Settings(max_samples=50_000))
+    assert d.prep.n <= 50_000 and d.prep.fs_hz < FS / 10
+    assert d.prep.band[1] < 0.45 * d.prep.fs_hz
+    assert [f.label for f in d.findings] == ["cubic_stiffness at x"], d.verdict()
+    full = out[1].findings[0].parameters["coefficient_per_mass"]
+    assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(full, rel=0.01)
+    assert any(n.startswith("decimated ") and "memory budget" in n for n in d.notes), d.notes
+
+    csv = tmp_path / "duffing.csv"
+    np.savetxt(csv, np.column_stack([u, x]), delimiter=",", header="force,x", comments="", fmt="%.9g")
+    args = ["discover", csv, "--fs", str(FS), "--excitation", "force:force", "--response", "x:displacement",
+            "--max-samples", "7000"]
+    code, text, err, tb = run_main(ident_main, args + ["--train", "20000:110000", "--test", "110000:150000"])
+    assert code == 0 and tb is None, (err, tb)
+    assert "cubic_stiffness at x" in text and "the span of the training and test samples" in text, text
+    # 20,000-150,000 is 6.5 s; 7,000 samples at the decimated rate (about 870 Hz) hold about 8 s
+    span = re.search(r"analysed ([\d.]+)-([\d.]+) s of 0-10 s", text)
+    assert span and float(span[1]) <= 1.0 and float(span[2]) >= 7.5, text
+    code, text, err, tb = run_main(ident_main, args + ["--train", "0:150000", "--test", "150000:200000"])
+    assert code == 2 and tb is None and len(err.strip().splitlines()) == 1, (err, tb)
+    assert "memory budget" in err and "10 s" in err, err
+
+
+def test_the_span_with_the_widest_range_of_amplitudes_is_the_one_analysed():
+    """A minute of a band-limited response at three levels (0.1 for 20 s, 1 for 20 s, 0.3 for 20 s), cut to
+    26 s by the budget: the span holds the step from 0.1 to 1, the largest change of level, with both
+    levels in it; its notes give the span in the record's seconds."""
+    fs = 10000.0
+    t = np.arange(int(60 * fs)) / fs
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal(t.size)
+    b, a = signal.butter(2, [8 / (fs / 2), 12 / (fs / 2)], "band")
+    y = np.where(t < 20, 0.1, np.where(t < 40, 1.0, 0.3)) * signal.lfilter(b, a, u)
+    ex = within_budget(Measurement(fs, Channel("f", "force", u), (Channel("y", "acceleration", y),)), 10_000)
+    start, stop = ex.start / fs, ex.stop / fs
+    assert ex.measurement.n == 10_000 and ex.measurement.start_s == pytest.approx(start)
+    assert start < 20 - 5 and stop > 20 + 5, (start, stop)
+    assert ex.notes[-1] == f"analysed {start:.6g}-{stop:.6g} s of 0-60 s to fit the memory budget (the span with " \
+                           "the widest range of amplitudes)"

@@ -28,7 +28,7 @@ from . import parse_split
 from ..config import build
 from ..discovery import Channel, Discovery, Measurement, discover, to_json
 from ..discovery.search import Settings, predict
-from ..discovery.signals import EXCITATIONS, RESPONSES
+from ..discovery.signals import EXCITATIONS, MAX_SAMPLES, RESPONSES
 from ..rig import RigParams
 
 matplotlib.use("Agg")
@@ -57,6 +57,9 @@ def add_parser(sub) -> None:
                                                    "low-level test); causes must then hold there too")
     p.add_argument("--train", help="training samples START:STOP (default: interleaved blocks, 60 %%)")
     p.add_argument("--test", help="held-out samples START:STOP (default: every 5th block's 3rd and 5th, 40 %%)")
+    p.add_argument("--max-samples", type=int, default=MAX_SAMPLES,
+                   help="samples x responses analysed at most; a longer record is decimated to the band's needs, then "
+                        f"cut to the span with the widest range of amplitudes (default {MAX_SAMPLES:,}, about 3.5 GB)")
     p.add_argument("--json", type=Path, help="write the result as JSON")
     p.add_argument("--report", type=Path, help="write a report folder (markdown, PNG)")
     p.add_argument("--force", action="store_true", help="replace an existing --json, write into a non-empty --report")
@@ -108,7 +111,10 @@ def run(args) -> int:
         raise ValueError("--fit-data fits a modal baseline; with --model the baseline is the config's rig model")
     rig = load_model(args.model) if args.model else None
     train, test = parse_split(args.train, args.test, m.n)
-    d = discover(m, rig=rig, fit_data=fit, train=train, test=test, progress=stage_printer(sys.stderr))
+    if args.max_samples < 1000:
+        raise ValueError(f"--max-samples {args.max_samples}: give at least 1000")
+    d = discover(m, rig=rig, fit_data=fit, train=train, test=test, settings=Settings(max_samples=args.max_samples),
+                 progress=stage_printer(sys.stderr))
     print(summary(d))
     if args.json:
         with safe_output(args.json, inputs=inputs, force=args.force, label="--json") as tmp:
@@ -228,14 +234,14 @@ def _time_and_spectrum(d: Discovery, path: Path) -> None:
         base = predict(d.baseline, d.baseline.model, prep, seg, d.warm)
         own = d.findings[0].baseline if d.findings and d.findings[0].baseline else d.baseline
         ext = predict(own, d.extended, prep, seg, d.warm, d.extended_output)
-        t = np.arange(seg.start, seg.stop) / prep.fs_hz
+        t = prep.start_s + np.arange(seg.start, seg.stop) / prep.fs_hz
         for i in range(k):
             ax = axes[i, j]
             ax.plot(t, prep.measured[seg, i], "k", lw=1, label="measured")
             ax.plot(t, base[:, i], "tab:red", lw=0.8, label="baseline")
             if d.findings:
                 ax.plot(t, ext[:, i], "tab:green", lw=0.8, ls="--", label="extended")
-            ax.set_title(f"{prep.names[i]}, held-out block {seg.start / prep.fs_hz:.1f}-{seg.stop / prep.fs_hz:.1f} s",
+            ax.set_title(f"{prep.names[i]}, held-out block {t[0]:.1f}-{t[-1] + 1 / prep.fs_hz:.1f} s",
                          fontsize=8)
             ax.set_xlabel("time [s]")
             ax.set_ylabel(f"{prep.kinds[i]} [{units[prep.kinds[i]]}]", fontsize=8)

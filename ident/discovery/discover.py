@@ -32,7 +32,7 @@ from .result import Discovery
 from .search import (Candidate, Scoring, Selection, Settings, baseline_residual, block_errors, busiest, choose,
                      clipping_candidates, clustered_p, gain_candidates, offset_findings, paired_p, pieces_per_block,
                      predict, refine, regress, score, significant, train_error)
-from .signals import Measurement, Prepared, modal_band, prepare
+from .signals import Measurement, Prepared, modal_band, prepare, within_budget
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
 
@@ -131,12 +131,42 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
     thread, nothing with two); with one, ``ident discover``, the tests and the benchmark's Dask tasks
     agree."""
     with threadpool_limits(limits=1, user_api="blas"):
-        return _discover(m, rig, fit_data, train, test, settings, progress or (lambda line: None))
+        m, fit_data, train, test, notes = _within_budget(m, fit_data, train, test, settings.max_samples)
+        try:
+            return _discover(m, rig, fit_data, train, test, settings, progress or (lambda line: None), notes)
+        except ValueError as exc:
+            if not notes:
+                raise
+            raise ValueError(f"{exc} ({'; '.join(notes)})") from exc
+
+
+def _within_budget(m: Measurement, fit_data: Measurement | None, train: slice | None, test: slice | None,
+                   max_samples: int):
+    """The record (and ``fit_data``) as ``signals.within_budget`` leaves them, the given training and test
+    samples mapped onto what is analysed, and the notes that say what was done."""
+    keep = None
+    if train is not None or test is not None:  # the defaults of ``split.given``
+        tr = train or slice(0, int(0.6 * m.n))
+        te = test or slice(tr.stop, m.n)
+        keep = (min(tr.start, te.start), max(tr.stop, te.stop))
+    ex = within_budget(m, max_samples, keep)
+    notes = list(ex.notes)
+    if keep is not None and ex.measurement is not m:
+        n = ex.measurement.n
+        train, test = (slice(max(0, ex.index(s.start)), min(n, ex.index(s.stop))) for s in (tr, te))
+    if fit_data is not None:
+        fx = within_budget(fit_data, max_samples)
+        fit_data = fx.measurement
+        notes += [f"fit data: {n}" for n in fx.notes]
+    return ex.measurement, fit_data, train, test, notes
 
 
 def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | None, train: slice | None,
-              test: slice | None, settings: Settings, say: Callable[[str], None]) -> Discovery:
-    notes: list[str] = []
+              test: slice | None, settings: Settings, say: Callable[[str], None],
+              budget_notes: list[str] = ()) -> Discovery:
+    notes: list[str] = list(budget_notes)
+    for line in budget_notes:
+        say(line)
     say(f"{m.n} samples at {m.fs_hz:g} Hz, {len(m.responses)} responses; "
         + ("the rig model is the baseline" if rig is not None else "fitting a modal baseline, its order on held-out"
            " blocks"))
@@ -184,7 +214,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
             split = split.without(hit)
             prep = replace(prep, blows=tuple(onsets))
             notes.append(f"left out blocks {hit}: transients the measured input cannot produce at "
-                         + ", ".join(f"{t / prep.fs_hz:.2f} s" for t in onsets))
+                         + ", ".join(f"{prep.start_s + t / prep.fs_hz:.2f} s" for t in onsets))
             if rig is None and fit_data is None:
                 # the baseline had fitted the blows' ringing as if the input had made it: it is fitted
                 # again on the same blocks with a free response of its own from each blow on (a blow is a
@@ -288,7 +318,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         notes.append(f"the baseline predicts the held-out blocks worse than predicting zero (NRMSE {n0:.3g}): its "
                      "linear part does not describe this record, and every gain here is measured against it")
     return Discovery(baseline, n0, e0, ext_model, ext_out, ext_err, ext_blocks, sel.findings, sel.ambiguous, scored,
-                     split, prep, warm, [t / prep.fs_hz for t in onsets], resid_rms, char, notes)
+                     split, prep, warm, [prep.start_s + t / prep.fs_hz for t in onsets], resid_rms, char, notes)
 
 
 def _settle_by_backbone(first: Candidate, alike: list[Candidate], prep: Prepared,

@@ -35,7 +35,7 @@ from .baselines import Baseline, Location, dominant_mode
 from .catalogue import (CAUSES, CONTACT, JOINT, ONSETS, SIDES, equivalent_coefficient, force_series, law_parameters,
                         shapes)
 from .model import NUMERIC_FAILURES, Element, LinearModel, force_response, lstsq, nudging_gain, simulate, substeps_for
-from .signals import ORDER, Prepared, convert
+from .signals import MAX_SAMPLES, ORDER, Prepared, convert
 from .split import Split
 
 
@@ -57,6 +57,7 @@ class Settings:
     max_locations: int = 6  # locations searched in full (ranked by how much of the residual they explain)
     max_refined: int = 4  # causes refined by simulation (each at its best location, best regressions first)
     max_joint: int = 6  # with a fitted baseline: the best regressions fitted again jointly with the linear part
+    max_samples: int = MAX_SAMPLES  # samples x responses analysed at most (``signals.within_budget``)
 
 
 @dataclass(frozen=True)

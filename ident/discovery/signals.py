@@ -28,11 +28,17 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-from scipy.signal import csd, welch
+from scipy.signal import csd, resample_poly, welch
 
 EXCITATIONS = ("force", "base_acceleration", "voltage")
 RESPONSES = ("displacement", "velocity", "acceleration")
 MIN_CYCLES = 20  # the band's low edge holds at least this many periods in the record
+# samples x responses discovery analyses at most by default: its modal states and band-limited conversions
+# are whole-record arrays, about 0.55 GB per million (stop 40: one hour of two accelerations at 1 kHz, 7.2
+# million, peaked at 3.9 GB), so the default keeps a run near 3.5 GB
+MAX_SAMPLES = 6_000_000
+WORKING_RATE = 16.0  # a record decimated to fit the budget keeps at least this many samples per period of the
+# preliminary band's top: the modal band (4.5 x the highest mode, below 0.45 fs) stays whole
 
 
 @dataclass(frozen=True)
@@ -49,6 +55,7 @@ class Measurement:
     fs_hz: float
     excitation: Channel
     responses: tuple[Channel, ...]
+    start_s: float = 0.0  # where the first sample lies in the record it was taken from (an excerpt's offset)
 
     def __post_init__(self):
         if not (np.isfinite(self.fs_hz) and self.fs_hz > 0):
@@ -249,6 +256,7 @@ class Prepared:
     excitation_kind: str = "force"
     transient: bool = False  # a hammer-hit record
     blows: tuple[int, ...] = ()  # samples where unmodelled blows strike: free responses start there
+    start_s: float = 0.0  # the record's time at sample 0 (``Measurement.start_s``)
 
     @property
     def n(self) -> int:
@@ -349,4 +357,96 @@ def prepare(m: Measurement, band: tuple[float, float] | None = None) -> Prepared
     u = convert(u_raw, fs, band, 0, 0)
     drive = convert(u_raw, fs, (0.0, 0.45 * fs), 0, 0)
     return Prepared(fs, m.names, [c.kind for c in m.responses], u, drive, base, zva, measured, band, edge, signs,
-                    notes, driving, m.excitation.kind, impulsive(u_raw))
+                    notes, driving, m.excitation.kind, impulsive(u_raw), start_s=m.start_s)
+
+
+# --- records over the memory budget -------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Excerpt:
+    """What a record became to fit the budget: every ``step``-th sample's worth (anti-aliased) of the
+    original samples [start, stop), and why."""
+
+    measurement: Measurement
+    step: int = 1
+    start: int = 0
+    stop: int | None = None
+    notes: tuple[str, ...] = ()
+
+    def index(self, sample: int) -> int:
+        """An original sample index in the excerpt (floored alike for starts and stops, so slices that did
+        not overlap still do not)."""
+        return (sample - self.start) // self.step
+
+
+def _decimated(m: Measurement, q: int) -> Measurement:
+    """Every channel low-passed below the new Nyquist and decimated by ``q`` (polyphase FIR, zero phase)."""
+    cut = lambda ch: Channel(ch.name, ch.kind, resample_poly(np.asarray(ch.values, float), 1, q))  # noqa: E731
+    return Measurement(m.fs_hz / q, cut(m.excitation), tuple(cut(ch) for ch in m.responses), m.start_s)
+
+
+def _cut(m: Measurement, start: int, stop: int) -> Measurement:
+    cut = lambda ch: Channel(ch.name, ch.kind, np.asarray(ch.values)[start:stop])  # noqa: E731
+    return Measurement(m.fs_hz, cut(m.excitation), tuple(cut(ch) for ch in m.responses),
+                       m.start_s + start / m.fs_hz)
+
+
+def widest_span(m: Measurement, length: int, per_span: int = 20) -> int:
+    """Start of the ``length`` samples whose motion spans the widest range of amplitudes: the responses'
+    RMS (each over its whole-record RMS, summed) in ``per_span`` blocks of the span, the mean of its louder
+    half over that of its quieter half; the earliest of equals. Discovery sees a nonlinearity as what
+    changes with amplitude, and its baseline needs the low amplitudes beside the high ones."""
+    block = max(1, length // per_span)
+    count = m.n // block
+    r = np.zeros(count)
+    for ch in m.responses:
+        y = np.asarray(ch.values, float)[:count * block]
+        y = y - y.mean()
+        r += np.sqrt(np.mean(y.reshape(count, block) ** 2, axis=1)) / max(float(np.sqrt(np.mean(y**2))), 1e-300)
+    # the louder half of the span's blocks over the quieter half: widest when two levels share the span
+    # evenly, so a step between them sits in its middle, not at an edge where a few blocks make it
+    w = np.sort(np.lib.stride_tricks.sliding_window_view(np.maximum(r, 1e-12), per_span), axis=1)
+    half = per_span // 2
+    spread = w[:, per_span - half:].mean(axis=1) / w[:, :half].mean(axis=1)
+    return int(np.argmax(spread)) * block
+
+
+def within_budget(m: Measurement, max_samples: int, keep: tuple[int, int] | None = None) -> Excerpt:
+    """The record as recorded when its samples x responses fit ``max_samples``; else decimated to the
+    lowest rate that keeps ``WORKING_RATE`` samples per period of the preliminary band's top (the band
+    where the input and the responses carry power), and if that is still too much, the span of the
+    budget's length with the widest range of amplitudes (``widest_span``), or the span ``keep`` (original
+    samples [start, stop): the given training and test samples). The notes say what was done."""
+    k = len(m.responses)
+    if m.n * k <= max_samples:
+        return Excerpt(m, stop=m.n)
+    top = preliminary_band(m)[1]
+    q = max(1, int(m.fs_hz // (WORKING_RATE * top)))
+    notes = []
+    out = m
+    if q > 1:
+        out = _decimated(m, q)
+        notes.append(f"decimated {q} x to {out.fs_hz:.6g} Hz to fit the memory budget ({max_samples:,} samples x "
+                     f"responses): the responses' power lies below {top:.3g} Hz")
+    length = max_samples // k
+    if out.n <= length:
+        return Excerpt(out, q, 0, m.n, tuple(notes))
+    if keep is not None:
+        a, b = keep[0] // q, -(-keep[1] // q)
+        if b - a > length:
+            raise ValueError(f"the training and test samples span {(keep[1] - keep[0]) / m.fs_hz:.6g} s; at "
+                             f"{out.fs_hz:.6g} Hz with {k} response{'s' if k > 1 else ''} at most "
+                             f"{length / out.fs_hz:.6g} s fit the memory budget ({max_samples:,} samples x "
+                             "responses): choose a shorter span or a larger budget")
+        # the rest of the budget as context on both sides: the band-pass's edges fall outside the given samples
+        a = min(max(0, a - (length - (b - a)) // 2), out.n - length)
+        b = a + length
+    else:
+        a = widest_span(out, length)
+        b = a + length
+    notes.append(f"analysed {out.start_s + a / out.fs_hz:.6g}-{out.start_s + b / out.fs_hz:.6g} s of "
+                 f"{m.start_s:.6g}-{m.start_s + m.n / m.fs_hz:.6g} s to fit the memory budget ("
+                 + ("the span of the training and test samples" if keep is not None
+                    else "the span with the widest range of amplitudes") + ")")
+    return Excerpt(_cut(out, a, b), q, a * q, min(m.n, b * q), tuple(notes))
