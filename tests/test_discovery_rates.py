@@ -85,6 +85,13 @@ def test_a_record_over_the_memory_budget_is_decimated_and_names_the_same_cubic(a
     full = out[1].findings[0].parameters["coefficient_per_mass"]
     assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(full, rel=0.01)
     assert any(n.startswith("decimated ") and "memory budget" in n for n in d.notes), d.notes
+    # a fit record at the same rate is decimated as the analysed one: the baseline's rate is the record's
+    half = u.size // 2
+    fit = Measurement(FS, Channel("force", "force", u[:half]), (Channel("x", "displacement", x[:half]),))
+    low = Measurement(FS, Channel("force", "force", u[half:]), (Channel("x", "displacement", x[half:]),))
+    d2 = discover(low, fit_data=fit, settings=Settings(max_samples=50_000))
+    step = round(FS / d2.prep.fs_hz)
+    assert step > 10 and f"fit data: decimated {step} x to {d2.prep.fs_hz:.6g} Hz" in " ".join(d2.notes), d2.notes
 
     csv = tmp_path / "duffing.csv"
     np.savetxt(csv, np.column_stack([u, x]), delimiter=",", header="force,x", comments="", fmt="%.9g")
@@ -92,13 +99,17 @@ def test_a_record_over_the_memory_budget_is_decimated_and_names_the_same_cubic(a
             "--max-samples", "7000"]
     code, text, err, tb = run_main(ident_main, args + ["--train", "20000:110000", "--test", "110000:150000"])
     assert code == 0 and tb is None, (err, tb)
-    assert "cubic_stiffness at x" in text and "the span of the training and test samples" in text, text
+    assert "cubic_stiffness at x" in text and "the span around the training and test samples" in text, text
     # 20,000-150,000 is 6.5 s; 7,000 samples at the decimated rate (about 870 Hz) hold about 8 s
     span = re.search(r"analysed ([\d.]+)-([\d.]+) s of 0-10 s", text)
     assert span and float(span[1]) <= 1.0 and float(span[2]) >= 7.5, text
     code, text, err, tb = run_main(ident_main, args + ["--train", "0:150000", "--test", "150000:200000"])
     assert code == 2 and tb is None and len(err.strip().splitlines()) == 1, (err, tb)
     assert "memory budget" in err and "10 s" in err, err
+    # --train alone: the held-out samples default to the rest of the record, which does not fit either
+    code, text, err, tb = run_main(ident_main, args + ["--train", "0:50000"])
+    assert code == 2 and tb is None and len(err.strip().splitlines()) == 1, (err, tb)
+    assert "give --test" in err and "memory budget" in err, err
 
 
 def test_the_span_with_the_widest_range_of_amplitudes_is_the_one_analysed():
@@ -117,3 +128,11 @@ def test_the_span_with_the_widest_range_of_amplitudes_is_the_one_analysed():
     assert start < 20 - 5 and stop > 20 + 5, (start, stop)
     assert ex.notes[-1] == f"analysed {start:.6g}-{stop:.6g} s of 0-60 s to fit the memory budget (the span with " \
                            "the widest range of amplitudes)"
+    # a step in the record's last blocks: the span holds it and stays inside the record, a whole budget long
+    # (999 samples are no whole number of 20 blocks: the widest span's start, 98, would run 14 past the end)
+    fs, n = 100.0, 1083
+    u = rng.standard_normal(n)
+    b, a = signal.butter(2, [8 / (fs / 2), 12 / (fs / 2)], "band")
+    y = np.where(np.arange(n) < n - 60, 0.1, 1.0) * signal.lfilter(b, a, u)
+    end = within_budget(Measurement(fs, Channel("f", "force", u), (Channel("y", "acceleration", y),)), 999)
+    assert (end.step, end.start, end.stop, end.measurement.n) == (1, 84, 1083, 999)

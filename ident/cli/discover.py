@@ -24,7 +24,7 @@ from daq.config import read_yaml_file
 from daq.safeio import Output, check_outputs, safe_folder, safe_output
 from replay.formats import format_of, mcap, read_column_matrix, read_samples
 
-from . import parse_split
+from . import number, parse_split
 from ..config import build
 from ..discovery import Channel, Discovery, Measurement, discover, to_json
 from ..discovery.search import Settings, predict
@@ -57,7 +57,7 @@ def add_parser(sub) -> None:
                                                    "low-level test); causes must then hold there too")
     p.add_argument("--train", help="training samples START:STOP (default: interleaved blocks, 60 %%)")
     p.add_argument("--test", help="held-out samples START:STOP (default: every 5th block's 3rd and 5th, 40 %%)")
-    p.add_argument("--max-samples", type=int, default=MAX_SAMPLES,
+    p.add_argument("--max-samples", type=number(1000, integer=True), default=MAX_SAMPLES,
                    help="samples x responses analysed at most; a longer record is decimated to the band's needs, then "
                         f"cut to the span with the widest range of amplitudes (default {MAX_SAMPLES:,}, about 3.5 GB)")
     p.add_argument("--json", type=Path, help="write the result as JSON")
@@ -111,8 +111,6 @@ def run(args) -> int:
         raise ValueError("--fit-data fits a modal baseline; with --model the baseline is the config's rig model")
     rig = load_model(args.model) if args.model else None
     train, test = parse_split(args.train, args.test, m.n)
-    if args.max_samples < 1000:
-        raise ValueError(f"--max-samples {args.max_samples}: give at least 1000")
     d = discover(m, rig=rig, fit_data=fit, train=train, test=test, settings=Settings(max_samples=args.max_samples),
                  progress=stage_printer(sys.stderr))
     print(summary(d))
@@ -170,8 +168,8 @@ def write_report(d: Discovery, folder: Path) -> None:
 {d.verdict()}
 
 - Baseline: {d.baseline.label}; held-out NRMSE {d.baseline_test_nrmse:.4f}
-- Analysis band: {d.prep.band[0]:.3g}-{d.prep.band[1]:.3g} Hz; held-out: {len(d.split.test)} blocks
-  ({', '.join(f'{s.start}:{s.stop}' for s in d.split.test)})
+- Analysis band: {d.prep.band[0]:.3g}-{d.prep.band[1]:.3g} Hz at {d.prep.fs_hz:.6g} Hz; held-out: {len(d.split.test)}
+  blocks ({', '.join(f'{_seconds(d.prep, s.start)}-{_seconds(d.prep, s.stop)} s' for s in d.split.test)})
 - Extended model: held-out NRMSE {d.extended_test_nrmse:.4f}, gain {d.gain:.3f}, against predicting zero
   {d.gain_vs_zero:.3f}
 {''.join(f'- {n}{chr(10)}' for n in d.prep.sign_notes + d.notes)}
@@ -188,6 +186,11 @@ def write_report(d: Discovery, folder: Path) -> None:
 ![restoring force](restoring_force.png)
 """
     (folder / "report.md").write_text(text)
+
+
+def _seconds(prep, sample: int) -> str:
+    """A sample of the analysed record as the record's time."""
+    return f"{prep.start_s + sample / prep.fs_hz:.2f}"
 
 
 def _params(p: dict) -> str:

@@ -66,7 +66,9 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
     if not np.any(light):
         raise ValueError("no lightly damped mode in the data: nothing resonates in the band "
                          f"{prep0.band[0]:.3g}-{prep0.band[1]:.3g} Hz")
-    return modal_band(first.model.frequencies_hz[light], m.fs_hz, min(m.n, src.n)), first.model.poles[light]
+    # the shorter record's duration bounds the low edge (the two may be at different rates)
+    n = int(min(m.n / m.fs_hz, src.n / src.fs_hz) * m.fs_hz)
+    return modal_band(first.model.frequencies_hz[light], m.fs_hz, n), first.model.poles[light]
 
 
 def _held_back(segs: list[slice]) -> tuple[np.ndarray, np.ndarray | None]:
@@ -135,27 +137,40 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
         try:
             return _discover(m, rig, fit_data, train, test, settings, progress or (lambda line: None), notes)
         except ValueError as exc:
-            if not notes:
+            if not notes or type(exc) is not ValueError or not str(exc):
                 raise
-            raise ValueError(f"{exc} ({'; '.join(notes)})") from exc
+            raise ValueError(f"{exc} (after {'; '.join(notes)})") from exc
+
+
+MIN_SLICE = 100  # samples a given training or test slice keeps at least once decimated (as ``parse_split``)
 
 
 def _within_budget(m: Measurement, fit_data: Measurement | None, train: slice | None, test: slice | None,
                    max_samples: int):
-    """The record (and ``fit_data``) as ``signals.within_budget`` leaves them, the given training and test
-    samples mapped onto what is analysed, and the notes that say what was done."""
-    keep = None
+    """The record (and ``fit_data``, decimated as the record when it has its rate) as
+    ``signals.within_budget`` leaves them, the given training and test samples mapped onto what is
+    analysed, and the notes that say what was done."""
+    keep, kept = None, "the training and test samples"
     if train is not None or test is not None:  # the defaults of ``split.given``
         tr = train or slice(0, int(0.6 * m.n))
         te = test or slice(tr.stop, m.n)
         keep = (min(tr.start, te.start), max(tr.stop, te.stop))
-    ex = within_budget(m, max_samples, keep)
+        if test is None:
+            kept = "--train and the held-out samples after it (by default to the record's end; give --test)"
+        elif train is None:
+            kept = "--test and the training samples (by default the record's first 60 %; give --train)"
+    ex = within_budget(m, max_samples, keep, kept=kept)
     notes = list(ex.notes)
     if keep is not None and ex.measurement is not m:
         n = ex.measurement.n
         train, test = (slice(max(0, ex.index(s.start)), min(n, ex.index(s.stop))) for s in (tr, te))
+        for name, s, given in (("--train", train, tr), ("--test", test, te)):
+            if s.stop - s.start < MIN_SLICE:
+                raise ValueError(f"{name} {given.start}:{given.stop} keeps {s.stop - s.start} samples once decimated "
+                                 f"{ex.step} x to fit the memory budget; give at least {MIN_SLICE * ex.step} samples")
     if fit_data is not None:
-        fx = within_budget(fit_data, max_samples)
+        same_rate = fit_data.fs_hz == m.fs_hz
+        fx = within_budget(fit_data, max_samples, step=ex.step if same_rate and ex.step > 1 else None)
         fit_data = fx.measurement
         notes += [f"fit data: {n}" for n in fx.notes]
     return ex.measurement, fit_data, train, test, notes
@@ -298,7 +313,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     # fit data: a cause must hold at the other level too (not spoil the baseline's fit there)
     if fit_data is not None:
         say("checking the significant ones at the fit record's level")
-        scored = _hold_at_fit_level(scored, baseline, prep_fit, warm, f_min, settings)
+        scored = _hold_at_fit_level(scored, baseline, prep_fit, _warm(baseline, prep_fit), f_min, settings)
 
     sel = _select(findable(scored, fitted_here=rig is None and fit_data is None), baseline, prep, split, sc,
                   settings, char)

@@ -98,6 +98,9 @@ def to_json(d: Discovery) -> dict:
                   "held_out": list(d.split.held_out), "excluded": list(d.split.excluded),
                   "train": [[s.start, s.stop] for s in d.split.train],
                   "test": [[s.start, s.stop] for s in d.split.test]},
+        # what was analysed: ``split`` counts samples of this (a record over the memory budget is decimated
+        # and cut, ``signals.within_budget``; the notes say so), from the record's time ``start_s``
+        "analysed": {"fs_hz": prep.fs_hz, "start_s": prep.start_s, "samples": prep.n},
         "band_hz": list(prep.band),
         "signs": {n: int(s) for n, s in zip(prep.names, prep.signs)},
         "sign_notes": prep.sign_notes,

@@ -412,41 +412,46 @@ def widest_span(m: Measurement, length: int, per_span: int = 20) -> int:
     return int(np.argmax(spread)) * block
 
 
-def within_budget(m: Measurement, max_samples: int, keep: tuple[int, int] | None = None) -> Excerpt:
+def within_budget(m: Measurement, max_samples: int, keep: tuple[int, int] | None = None,
+                  step: int | None = None, kept: str = "the training and test samples") -> Excerpt:
     """The record as recorded when its samples x responses fit ``max_samples``; else decimated to the
     lowest rate that keeps ``WORKING_RATE`` samples per period of the preliminary band's top (the band
-    where the input and the responses carry power), and if that is still too much, the span of the
-    budget's length with the widest range of amplitudes (``widest_span``), or the span ``keep`` (original
-    samples [start, stop): the given training and test samples). The notes say what was done."""
+    where the input and the responses carry power), or by ``step`` when given (a fit record decimated as
+    the analysed one), and if that is still too much, the span of the budget's length with the widest
+    range of amplitudes (``widest_span``), or the span around ``keep`` (original samples [start, stop),
+    ``kept`` says what they are; refused if they do not fit). The notes say what was done."""
     k = len(m.responses)
-    if m.n * k <= max_samples:
+    if m.n * k <= max_samples and not (step and step > 1):
         return Excerpt(m, stop=m.n)
-    top = preliminary_band(m)[1]
-    q = max(1, int(m.fs_hz // (WORKING_RATE * top)))
     notes = []
+    if step is None:
+        top = preliminary_band(m)[1]
+        q = max(1, int(m.fs_hz // (WORKING_RATE * top)))
+        why = f"the responses' power lies below {top:.3g} Hz"
+    else:
+        q, why = step, "as the analysed record"
     out = m
     if q > 1:
         out = _decimated(m, q)
         notes.append(f"decimated {q} x to {out.fs_hz:.6g} Hz to fit the memory budget ({max_samples:,} samples x "
-                     f"responses): the responses' power lies below {top:.3g} Hz")
+                     f"responses): {why}")
     length = max_samples // k
     if out.n <= length:
         return Excerpt(out, q, 0, m.n, tuple(notes))
     if keep is not None:
         a, b = keep[0] // q, -(-keep[1] // q)
         if b - a > length:
-            raise ValueError(f"the training and test samples span {(keep[1] - keep[0]) / m.fs_hz:.6g} s; at "
-                             f"{out.fs_hz:.6g} Hz with {k} response{'s' if k > 1 else ''} at most "
-                             f"{length / out.fs_hz:.6g} s fit the memory budget ({max_samples:,} samples x "
-                             "responses): choose a shorter span or a larger budget")
+            raise ValueError(f"{kept} span {(keep[1] - keep[0]) / m.fs_hz:.6g} s; at {out.fs_hz:.6g} Hz with {k} "
+                             f"response{'s' if k > 1 else ''} at most {length / out.fs_hz:.6g} s fit the memory "
+                             f"budget ({max_samples:,} samples x responses): choose a shorter span or a larger "
+                             "budget (--max-samples)")
         # the rest of the budget as context on both sides: the band-pass's edges fall outside the given samples
         a = min(max(0, a - (length - (b - a)) // 2), out.n - length)
-        b = a + length
     else:
-        a = widest_span(out, length)
-        b = a + length
-    notes.append(f"analysed {out.start_s + a / out.fs_hz:.6g}-{out.start_s + b / out.fs_hz:.6g} s of "
+        a = min(widest_span(out, length), out.n - length)
+    b = a + length
+    notes.append(f"analysed {m.start_s + a * q / m.fs_hz:.6g}-{m.start_s + min(m.n, b * q) / m.fs_hz:.6g} s of "
                  f"{m.start_s:.6g}-{m.start_s + m.n / m.fs_hz:.6g} s to fit the memory budget ("
-                 + ("the span of the training and test samples" if keep is not None
+                 + (f"the span around {kept}" if keep is not None
                     else "the span with the widest range of amplitudes") + ")")
     return Excerpt(_cut(out, a, b), q, a * q, min(m.n, b * q), tuple(notes))
