@@ -7,6 +7,8 @@ with 1 % white noise, the force random and low-passed at 150 Hz, the cubic worth
 response's RMS."""
 
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -136,3 +138,17 @@ def test_the_span_with_the_widest_range_of_amplitudes_is_the_one_analysed():
     y = np.where(np.arange(n) < n - 60, 0.1, 1.0) * signal.lfilter(b, a, u)
     end = within_budget(Measurement(fs, Channel("f", "force", u), (Channel("y", "acceleration", y),)), 999)
     assert (end.step, end.start, end.stop, end.measurement.n) == (1, 84, 1083, 999)
+
+
+def test_the_memory_benchmark_runs_both_ways_and_finds_the_structures_modes():
+    """``ident bench memory`` on a short record: both runs (in processes of their own) find the two modes
+    the record was made with (12 and 31 Hz, within 1 %), say nothing is found on a linear record, and the
+    ratios line is printed."""
+    proc = subprocess.run([sys.executable, "-m", "ident", "bench", "memory", "--duration", "20", "--fs", "2000"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    runs = [line for line in proc.stdout.splitlines() if "--max-samples" in line]
+    assert len(runs) == 2 and "ratios, within the budget / as recorded: peak memory" in proc.stdout, proc.stdout
+    for line in runs:
+        modes = [float(f) for f in re.search(r"modes ([\d., ]+) Hz", line)[1].split(", ")]
+        assert modes == pytest.approx([12.0, 31.0], rel=0.01) and "nothing found" in line, line

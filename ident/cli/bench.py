@@ -1,7 +1,9 @@
-"""``ident bench sweep|discovery|batch``: the benchmarks (printed figures, not tests).
+"""``ident bench sweep|discovery|batch|memory``: the benchmarks (printed figures, not tests).
 
 ``discovery`` is ``ident.cli.bench_discovery`` (hidden-effect cases, on Dask with ``--workers`` or
-``--scheduler``), ``batch`` is ``ident.cli.bench_batch`` (``ident batch`` on 1 and 2 local workers). Here:
+``--scheduler``), ``batch`` is ``ident.cli.bench_batch`` (``ident batch`` on 1 and 2 local workers),
+``memory`` is ``ident.cli.bench_memory`` (``discover`` on a long record within its memory budget and
+without). Here:
 ``sweep``, this project's sparsification sweep against a plain pysindy loop.
 
 Both run the same job on the paper's Table 2 data (Duffing, noise eta = 0.08
@@ -27,9 +29,10 @@ from ..derivatives import smooth
 from ..library import PolynomialForcingLibrary
 from ..paper.duffing import denoise_window, duffing_data
 from ..sindy import sweep
-from . import DURATION, SEED, number
+from . import DURATION, RATE_HZ, SEED, number
 from .bench_batch import run_bench as run_batch_bench
 from .bench_discovery import RIG_CASE_S, run_discovery
+from .bench_memory import run_bench as run_memory_bench
 from .engine import add_options
 
 
@@ -38,9 +41,10 @@ TOLERANCE = 0.5  # the same selection rule as ident.sindy.sweep's default
 
 def add_parser(sub) -> None:
     p = sub.add_parser("bench", help="benchmarks (printed ratios, not tests)")
-    p.add_argument("what", choices=["sweep", "discovery", "batch"],
+    p.add_argument("what", choices=["sweep", "discovery", "batch", "memory"],
                    help="sweep: ours vs a pysindy fit+simulate loop; discovery: hidden-effect cases; batch: "
-                        "ident batch in this process and on 1 and 2 local Dask workers")
+                        "ident batch in this process and on 1 and 2 local Dask workers; memory: discover on a long "
+                        "record within its memory budget and as recorded")
     p.add_argument("--cases", type=number(1, 100_000, integer=True), default=100,
                    help="discovery: number of seeded cases (default 100)")
     p.add_argument("--generator", choices=("independent", "rig"), default="independent",
@@ -54,7 +58,11 @@ def add_parser(sub) -> None:
                    help="discovery: also write each case's truth, verdict and discover's JSON (every candidate) as "
                         "a line of OUT.jsonl, for studies without running the cases again (never replaces a file)")
     p.add_argument("--duration", type=DURATION, help=f"discovery: the rig generator's case length (default "
-                                                       f"{RIG_CASE_S:g} s); batch: each recording's (default 8 s)")
+                                                       f"{RIG_CASE_S:g} s); batch: each recording's (default 8 s); "
+                                                       "memory: the record's (default 120 s)")
+    p.add_argument("--fs", type=RATE_HZ, dest="fs_hz", help="memory: the record's sampling rate (default 10 kHz)")
+    p.add_argument("--max-samples", type=number(1000, integer=True),
+                   help="memory: the budget of the first run (default a quarter of the record's samples x responses)")
     p.add_argument("--campaign", type=Path, help="batch: the campaign's folder (made there if missing or empty, "
                                                  "reused after; default: a temporary folder)")
     p.add_argument("--recordings", type=number(2, 100_000, integer=True), default=100,
@@ -106,6 +114,10 @@ def run(args) -> int:
             raise ValueError("--twins needs the independent generator: daq.sim.hidden has no twins")
         return run_discovery(args.generator, args.cases, args.seed, args.workers, args.scheduler,
                              args.duration or RIG_CASE_S, args.twins, args.save)
+    if args.what != "memory" and (args.fs_hz is not None or args.max_samples is not None):
+        raise ValueError("--fs and --max-samples are for ident bench memory")
+    if args.what == "memory":
+        return run_memory_bench(args.duration or 120.0, args.fs_hz or 10_000.0, args.max_samples)
     if args.what == "batch":
         if args.scheduler or args.workers is not None:
             raise ValueError("ident bench batch compares 1 and 2 local workers itself; --scheduler and --workers "
