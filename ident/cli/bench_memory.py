@@ -23,6 +23,8 @@ import time
 import numpy as np
 from scipy import signal
 
+from ..discovery import Channel, Measurement, Settings, discover
+
 MODES = ((12.0, 0.02, (1.0, 0.6)), (31.0, 0.015, (0.5, -0.8)))  # Hz, damping ratio, the two sensors' shares
 
 
@@ -49,8 +51,6 @@ def _peak_gb() -> float:
 
 def child(seconds: float, fs_hz: float, max_samples: int) -> dict:
     """One run (in its own process): the record made, then discovered within ``max_samples``."""
-    from ..discovery import Channel, Measurement, Settings, discover
-
     u, y1, y2 = record(seconds, fs_hz)
     m = Measurement(fs_hz, Channel("force", "force", u),
                     (Channel("a1", "acceleration", y1), Channel("a2", "acceleration", y2)))
