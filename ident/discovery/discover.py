@@ -67,7 +67,7 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
         raise ValueError("no lightly damped mode in the data: nothing resonates in the band "
                          f"{prep0.band[0]:.3g}-{prep0.band[1]:.3g} Hz")
     # the shorter record's duration bounds the low edge (the two may be at different rates)
-    n = int(min(m.n / m.fs_hz, src.n / src.fs_hz) * m.fs_hz)
+    n = min(m.n, src.n if src.fs_hz == m.fs_hz else int(round(src.n * m.fs_hz / src.fs_hz)))
     return modal_band(first.model.frequencies_hz[light], m.fs_hz, n), first.model.poles[light]
 
 
