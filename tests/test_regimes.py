@@ -248,6 +248,19 @@ def test_flicker_shorter_than_the_dwell_is_no_change():
     assert changes == [] and set(labels) == {"impacting-both"}
 
 
+def test_the_starting_regime_is_each_beams_likelier_state_and_then_held_by_the_hysteresis():
+    """A beam at p = 0.6 in the first window starts hitting (the likelier state; the hysteresis has no
+    state yet to hold) and is held there while p stays above 0.5 - h; the same p after a free start does
+    not make it hitting."""
+    cfg = RegimeConfig(dwell=2, hysteresis=0.2)
+    labels, changes = decided([(GRAZE, HIT)] + [(0.45, HIT), (GRAZE, HIT)] * 10, cfg)
+    assert changes == [] and set(labels) == {"impacting-both"}
+    labels, changes = decided([(0.45, HIT)] + [(GRAZE, HIT)] * 10, cfg)
+    assert changes == [] and set(labels) == {"localized-2"}
+    labels, changes = decided([(0.5, 0.51)], cfg)  # at exactly 0.5 a beam is not the likelier hitting
+    assert labels == ["localized-2"]
+
+
 def test_windows_inside_the_hysteresis_band_neither_count_nor_break_the_dwell():
     cfg = RegimeConfig(dwell=2, max_dwell=8, hysteresis=0.2)
     start = [(HIT, FREE)] * 4  # localized-1
