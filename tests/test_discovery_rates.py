@@ -15,6 +15,7 @@ import pytest
 from scipy import signal
 
 from clitools import run_main
+from ident.cli.bench_memory import record
 from ident.cli.main import main as ident_main
 from ident.discovery import Channel, Measurement, Settings, discover
 from ident.discovery.signals import within_budget
@@ -152,3 +153,19 @@ def test_the_memory_benchmark_runs_both_ways_and_finds_the_structures_modes():
     for line in runs:
         modes = [float(f) for f in re.search(r"modes ([\d., ]+) Hz", line)[1].split(", ")]
         assert modes == pytest.approx([12.0, 31.0], rel=0.01) and "nothing found" in line, line
+
+
+def test_a_clipped_sensor_is_found_in_a_record_decimated_to_fit_the_budget():
+    """A linear two-mode record (``ident bench memory``'s, made with scipy's lfilter) whose first
+    accelerometer clips at 0.6 of its peak (2 % of its samples at the rail), 30 s at 5 kHz, against a budget
+    of a quarter: decimation smooths the flat tops away, so the clipping is read off the record as
+    recorded; it is the finding, at the rail's value."""
+    fs = 5000.0
+    u, y1, y2 = record(30, fs)
+    rail = 0.6 * float(np.abs(y1).max())
+    m = Measurement(fs, Channel("force", "force", u), (Channel("a1", "acceleration", np.clip(y1, -rail, rail)),
+                                                       Channel("a2", "acceleration", y2)))
+    d = discover(m, settings=Settings(max_samples=75_000))
+    assert d.prep.fs_hz < fs and any(n.startswith("decimated 2 x") for n in d.notes), d.notes
+    assert [f.label for f in d.findings] == ["clipping at a1"] and not d.ambiguous[0], d.verdict()
+    assert d.findings[0].parameters["range"] == pytest.approx(rail, rel=1e-9)

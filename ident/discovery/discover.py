@@ -30,8 +30,8 @@ from .characterise import characterise
 from .model import NUMERIC_FAILURES
 from .result import Discovery
 from .search import (Candidate, Scoring, Selection, Settings, baseline_residual, block_errors, busiest, choose,
-                     clipping_candidates, clustered_p, gain_candidates, offset_findings, paired_p, pieces_per_block,
-                     predict, refine, regress, score, significant, train_error)
+                     clipped_ranges, clipping_candidates, clustered_p, gain_candidates, offset_findings, paired_p,
+                     pieces_per_block, predict, refine, regress, score, significant, train_error)
 from .signals import Measurement, Prepared, modal_band, prepare, within_budget
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
@@ -133,9 +133,11 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
     thread, nothing with two); with one, ``ident discover``, the tests and the benchmark's Dask tasks
     agree."""
     with threadpool_limits(limits=1, user_api="blas"):
+        ranges = clipped_ranges(ch.values for ch in m.responses)  # as recorded, before any decimation
         m, fit_data, train, test, notes = _within_budget(m, fit_data, train, test, settings.max_samples)
         try:
-            return _discover(m, rig, fit_data, train, test, settings, progress or (lambda line: None), notes)
+            return _discover(m, rig, fit_data, train, test, settings, progress or (lambda line: None), notes,
+                             ranges)
         except ValueError as exc:
             if not notes or type(exc) is not ValueError or not str(exc):
                 raise
@@ -178,7 +180,7 @@ def _within_budget(m: Measurement, fit_data: Measurement | None, train: slice | 
 
 def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | None, train: slice | None,
               test: slice | None, settings: Settings, say: Callable[[str], None],
-              budget_notes: list[str] = ()) -> Discovery:
+              budget_notes: list[str] = (), clip_ranges: list[float | None] | None = None) -> Discovery:
     notes: list[str] = list(budget_notes)
     for line in budget_notes:
         say(line)
@@ -287,7 +289,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
             if again is not None:
                 cands.append(again)
     raw = np.column_stack([prep.signs[i] * np.asarray(ch.values, float) for i, ch in enumerate(m.responses)])
-    cands += clipping_candidates(prep, raw)
+    cands += clipping_candidates(prep, clipped_ranges(raw.T) if clip_ranges is None else clip_ranges)
     if "sensor_gain" in baseline.causes:
         cands += gain_candidates(baseline, prep, split, warm)
 

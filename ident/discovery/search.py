@@ -411,15 +411,23 @@ def _physical(baseline: Baseline, loc: Location, cause: str, shp: dict, elements
     return out
 
 
-def clipping_candidates(prep: Prepared, raw: np.ndarray, share: float = 0.002) -> list[Candidate]:
-    """A response whose samples pile up at its extreme value (``share`` of them or more) was clipped."""
+def clipped_ranges(responses, share: float = 0.002) -> list[float | None]:
+    """Per response (samples as recorded), its extreme value where its samples pile up there (``share`` of
+    them or more: the sensor's full scale, reached), else None."""
     out = []
-    for i, name in enumerate(prep.names):
-        x = raw[:, i]
-        top = float(np.max(np.abs(x)))
-        if top > 0 and np.mean(np.abs(x) >= top * (1 - 1e-6)) >= share:
-            out.append(Candidate("clipping", name, {"range": top}, output=((i, "clip", top),)))
+    for x in responses:
+        a = np.abs(np.asarray(x, float))
+        top = float(np.max(a))
+        out.append(top if top > 0 and np.mean(a >= top * (1 - 1e-6)) >= share else None)
     return out
+
+
+def clipping_candidates(prep: Prepared, ranges: list[float | None]) -> list[Candidate]:
+    """A clipping at every response ``clipped_ranges`` found clipped. The ranges are read off the record as
+    recorded: a record decimated to fit the memory budget has its flat tops smoothed, but clipped at the
+    same range."""
+    return [Candidate("clipping", name, {"range": top}, output=((i, "clip", top),))
+            for i, (name, top) in enumerate(zip(prep.names, ranges)) if top is not None]
 
 
 def offset_findings(prep: Prepared, raw: np.ndarray, split: Split, piece: int, settings: Settings) -> list[Candidate]:
