@@ -451,7 +451,7 @@ def _hold_at_fit_level(cands: list[Candidate], baseline: Baseline, prep_fit: Pre
                                   c.output, np.inf, piece)
             p = paired_p(ef, e0f)
             # significantly and materially worse (``search.displaces``' reason: over a record's pieces a paired
-            # test calls a sliver significant; a contact 0.2 % worse at p = 0.07 was set aside on a Duffing pair)
+            # test calls a sliver significant; a contact < 0.5 % worse at p = 0.07 was set aside on a Duffing pair)
             if p < settings.alpha and nf > (1.0 + settings.gain_floor) * n0f:
                 c = replace(c, p_value=1.0, note=f"{FIT_BREAK}: it predicts that record's held-out blocks "
                                                  f"{nf / n0f - 1:.0%} worse than the baseline (NRMSE {nf:.3g} "
