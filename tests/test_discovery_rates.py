@@ -27,18 +27,24 @@ FS = 20000.0
 W, ZETA = 2 * np.pi * 20.0, 0.02
 
 
-def _duffing(seconds: float = 10.0) -> tuple[np.ndarray, np.ndarray, float]:
-    n = int(seconds * FS)
-    rng = np.random.default_rng(7)
-    b, a = signal.butter(4, 150 / (FS / 2))
-    u = signal.lfilter(b, a, rng.standard_normal(n))
-    lin = signal.lti([1], [1, 2 * ZETA * W, W * W]).to_discrete(1 / FS, method="bilinear")
+def _force(fs: float, seconds: float, seed: int):
+    """The random force low-passed at 150 Hz, the cubic worth 0.3 w^2 x at its linear response's RMS, and
+    the generator (its next draws are the sensor noise)."""
+    rng = np.random.default_rng(seed)
+    b, a = signal.butter(4, 150 / (fs / 2))
+    u = signal.lfilter(b, a, rng.standard_normal(int(seconds * fs)))
+    lin = signal.lti([1], [1, 2 * ZETA * W, W * W]).to_discrete(1 / fs, method="bilinear")
     k3 = 0.3 * W * W / signal.lfilter(np.ravel(lin.num), np.ravel(lin.den), u).std() ** 2
-    h, x, v = 1 / FS, 0.0, 0.0
-    out = np.empty(n)
+    return u, k3, rng
+
+
+def _integrate(u: np.ndarray, fs: float, k3: float) -> np.ndarray:
+    """x of x'' + 2 zeta w x' + w^2 x + k3 x^3 = u from rest, RK4 on the force's linear interpolation."""
+    h, x, v = 1 / fs, 0.0, 0.0
+    out = np.empty(u.size)
     acc = lambda x, v, f: f - 2 * ZETA * W * v - W * W * x - k3 * x * x * x  # noqa: E731
     f = u.tolist() + [float(u[-1])]
-    for i in range(n):
+    for i in range(u.size):
         fa, fb = f[i], f[i + 1]
         fm = 0.5 * (fa + fb)
         k1x, k1v = v, acc(x, v, fa)
@@ -48,7 +54,13 @@ def _duffing(seconds: float = 10.0) -> tuple[np.ndarray, np.ndarray, float]:
         x += h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
         v += h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
         out[i] = x
-    return u, out + 0.01 * out.std() * rng.standard_normal(n), k3
+    return out
+
+
+def _duffing(seconds: float = 10.0) -> tuple[np.ndarray, np.ndarray, float]:
+    u, k3, rng = _force(FS, seconds, 7)
+    x = _integrate(u, FS, k3)
+    return u, x + 0.01 * x.std() * rng.standard_normal(u.size), k3
 
 
 @pytest.fixture(scope="module")
@@ -177,26 +189,10 @@ def test_a_clipped_sensor_is_found_in_a_record_decimated_to_fit_the_budget():
 def _duffing_levels(fs=2000.0, seconds=20.0, low=0.2):
     """The Duffing oscillator of ``_duffing`` (same w, zeta, cubic worth 0.3 w^2 x at the high level's linear
     RMS), integrated at ``fs`` under one random force at two levels: (force, x) at ``low`` x and at 1 x."""
-    rng = np.random.default_rng(3)
-    b, a = signal.butter(4, 150 / (fs / 2))
-    u = signal.lfilter(b, a, rng.standard_normal(int(seconds * fs)))
-    lin = signal.lti([1], [1, 2 * ZETA * W, W * W]).to_discrete(1 / fs, method="bilinear")
-    k3 = 0.3 * W * W / signal.lfilter(np.ravel(lin.num), np.ravel(lin.den), u).std() ** 2
-    acc = lambda x, v, f: f - 2 * ZETA * W * v - W * W * x - k3 * x * x * x  # noqa: E731
+    u, k3, rng = _force(fs, seconds, 3)
     out = []
     for scale in (low, 1.0):
-        f = (scale * u).tolist() + [scale * float(u[-1])]
-        h, x, v, y = 1 / fs, 0.0, 0.0, np.empty(u.size)
-        for i in range(u.size):
-            fa, fb = f[i], f[i + 1]
-            fm = 0.5 * (fa + fb)
-            k1x, k1v = v, acc(x, v, fa)
-            k2x, k2v = v + 0.5 * h * k1v, acc(x + 0.5 * h * k1x, v + 0.5 * h * k1v, fm)
-            k3x, k3v = v + 0.5 * h * k2v, acc(x + 0.5 * h * k2x, v + 0.5 * h * k2v, fm)
-            k4x, k4v = v + h * k3v, acc(x + h * k3x, v + h * k3v, fb)
-            x += h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
-            v += h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
-            y[i] = x
+        y = _integrate(scale * u, fs, k3)
         out.append((scale * u, y + 0.01 * y.std() * rng.standard_normal(u.size)))
     return out, k3
 

@@ -180,7 +180,7 @@ def _within_budget(m: Measurement, fit_data: Measurement | None, train: slice | 
 
 def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | None, train: slice | None,
               test: slice | None, settings: Settings, say: Callable[[str], None],
-              budget_notes: list[str] = (), clip_ranges: list[float | None] | None = None) -> Discovery:
+              budget_notes: list[str], clip_ranges: list[float | None]) -> Discovery:
     notes: list[str] = list(budget_notes)
     for line in budget_notes:
         say(line)
@@ -289,7 +289,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
             if again is not None:
                 cands.append(again)
     raw = np.column_stack([prep.signs[i] * np.asarray(ch.values, float) for i, ch in enumerate(m.responses)])
-    cands += clipping_candidates(prep, clipped_ranges(raw.T) if clip_ranges is None else clip_ranges)
+    cands += clipping_candidates(prep, clip_ranges)
     if "sensor_gain" in baseline.causes:
         cands += gain_candidates(baseline, prep, split, warm)
 

@@ -369,9 +369,9 @@ class Excerpt:
     original samples [start, stop), and why."""
 
     measurement: Measurement
-    step: int = 1
-    start: int = 0
-    stop: int | None = None
+    step: int
+    start: int
+    stop: int
     notes: tuple[str, ...] = ()
 
     def index(self, sample: int) -> int:
@@ -380,16 +380,19 @@ class Excerpt:
         return (sample - self.start) // self.step
 
 
+def _each_channel(m: Measurement, f, fs_hz: float, start_s: float) -> Measurement:
+    """``m`` with ``f`` applied to every channel's values."""
+    ch = lambda c: Channel(c.name, c.kind, f(np.asarray(c.values, float)))  # noqa: E731
+    return Measurement(fs_hz, ch(m.excitation), tuple(ch(c) for c in m.responses), start_s)
+
+
 def _decimated(m: Measurement, q: int) -> Measurement:
     """Every channel low-passed below the new Nyquist and decimated by ``q`` (polyphase FIR, zero phase)."""
-    cut = lambda ch: Channel(ch.name, ch.kind, resample_poly(np.asarray(ch.values, float), 1, q))  # noqa: E731
-    return Measurement(m.fs_hz / q, cut(m.excitation), tuple(cut(ch) for ch in m.responses), m.start_s)
+    return _each_channel(m, lambda x: resample_poly(x, 1, q), m.fs_hz / q, m.start_s)
 
 
 def _cut(m: Measurement, start: int, stop: int) -> Measurement:
-    cut = lambda ch: Channel(ch.name, ch.kind, np.asarray(ch.values)[start:stop])  # noqa: E731
-    return Measurement(m.fs_hz, cut(m.excitation), tuple(cut(ch) for ch in m.responses),
-                       m.start_s + start / m.fs_hz)
+    return _each_channel(m, lambda x: x[start:stop], m.fs_hz, m.start_s + start / m.fs_hz)
 
 
 def widest_span(m: Measurement, length: int, per_span: int = 20) -> int:
@@ -422,7 +425,7 @@ def within_budget(m: Measurement, max_samples: int, keep: tuple[int, int] | None
     ``kept`` says what they are; refused if they do not fit). The notes say what was done."""
     k = len(m.responses)
     if m.n * k <= max_samples and not (step and step > 1):
-        return Excerpt(m, stop=m.n)
+        return Excerpt(m, 1, 0, m.n)
     notes = []
     if step is None:
         top = preliminary_band(m)[1]
