@@ -19,9 +19,10 @@ from clitools import run_main
 from ident.cli.bench_memory import record
 from ident.cli.main import main as ident_main
 from ident.discovery import Channel, Measurement, Settings, discover
-from ident.discovery.discover import _set_aside
-from ident.discovery.search import Candidate
-from ident.discovery.signals import within_budget
+from ident.discovery.catalogue import CAUSES
+from ident.discovery.discover import _set_aside, _split, _warm
+from ident.discovery.search import Candidate, FitLevel, _holds_at, _scaled
+from ident.discovery.signals import prepare, within_budget
 
 FS = 20000.0
 W, ZETA = 2 * np.pi * 20.0, 0.02
@@ -197,14 +198,19 @@ def _duffing_levels(fs=2000.0, seconds=20.0, low=0.2):
     return out, k3
 
 
-def test_with_a_low_level_fit_record_the_cubic_holds_at_both_levels_and_what_breaks_the_low_one_is_said():
+@pytest.fixture(scope="module")
+def two_levels():
+    (lo, hi), k3 = _duffing_levels()
+    meas = [Measurement(2000.0, Channel("force", "force", u), (Channel("x", "displacement", x),)) for u, x in (lo, hi)]
+    return meas, k3, discover(meas[1], fit_data=meas[0])
+
+
+def test_with_a_low_level_fit_record_the_cubic_holds_at_both_levels_and_what_breaks_the_low_one_is_said(two_levels):
     """``discover(high, fit_data=low)`` on a Duffing oscillator at two force levels (0.2 and 1): the cubic is
     named, its coefficient within 25 % of the oscillator's; candidates that predict the low level's held-out
     blocks materially worse are set aside with the figures (and no candidate within the gain floor of the
     baseline there is)."""
-    (lo, hi), k3 = _duffing_levels()
-    meas = [Measurement(2000.0, Channel("force", "force", u), (Channel("x", "displacement", x),)) for u, x in (lo, hi)]
-    d = discover(meas[1], fit_data=meas[0])
+    _, k3, d = two_levels
     assert [f.label for f in d.findings] == ["cubic_stiffness at x"], d.verdict()
     assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(k3, rel=0.25)
     aside = [c for c in d.candidates if c.note.startswith("breaks the fit record")]
@@ -213,6 +219,26 @@ def test_with_a_low_level_fit_record_the_cubic_holds_at_both_levels_and_what_bre
         figures = re.search(r"(\d+)% worse than the baseline \(NRMSE ([\d.e+-]+) against ([\d.e+-]+)", c.note)
         worse, mine, base = figures.groups()
         assert c.p_value == 1.0 and float(mine) > 1.03 * float(base) and int(worse) >= 3, c.note
+
+
+def test_a_refinement_with_a_fit_record_keeps_only_versions_that_hold_at_its_level(two_levels):
+    """``search._holds_at``, the refinement's rule at the fit record's level: the named cubic holds there (the
+    oscillator's own law), the same cubic 100 times stronger does not (at the low level, a fifth of the force,
+    its force is about four times what the true cubic's is at the high level), and a version that adds nothing
+    to the baseline holds by construction."""
+    meas, k3, d = two_levels
+    cubic = d.findings[0]
+    prep_f = prepare(meas[0], d.prep.band)
+    fit = FitLevel(prep_f, (slice(prep_f.edge, prep_f.n - prep_f.edge),), _split(prep_f), _warm(d.baseline, prep_f))
+    loc = next(loc for loc in d.baseline.locations(prep_f) if loc.name == cubic.location)
+    holds = _holds_at(fit, loc, d.baseline, cubic.baseline or d.baseline, Settings())
+    shape = {p.name: cubic.parameters[p.name] for p in CAUSES[cubic.cause].shape}
+    assert holds(cubic)
+    assert not holds(_scaled(cubic, cubic.baseline or d.baseline, loc, np.full(len(cubic.elements), np.log(100.0)),
+                             shape))
+    nothing = _holds_at(fit, loc, d.baseline, d.baseline, Settings())
+    assert nothing(replace(cubic, baseline=None, elements=(), output=()))
+    assert _holds_at(None, loc, d.baseline, d.baseline, Settings())(cubic)
 
 
 def test_the_best_candidate_the_fit_record_set_aside_is_said_when_it_gains_more_than_the_answer():

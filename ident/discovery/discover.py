@@ -29,7 +29,7 @@ from .catalogue import CAUSES
 from .characterise import characterise
 from .model import NUMERIC_FAILURES
 from .result import Discovery
-from .search import (Candidate, Scoring, Selection, Settings, baseline_residual, block_errors, busiest, choose,
+from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, block_errors, busiest, choose,
                      clipped_ranges, clipping_candidates, clustered_p, gain_candidates, offset_findings, paired_p,
                      pieces_per_block, predict, refine, regress, score, significant, train_error)
 from .signals import Measurement, Prepared, modal_band, prepare, within_budget
@@ -295,7 +295,10 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
 
     # refine each cause's best location (by the regression), then score everything on held-out blocks
     by_loc = {loc.name: loc for loc in locations}
-    fit_record = None if fit_data is None else (prep_fit, (slice(prep_fit.edge, prep_fit.n - prep_fit.edge),))
+    fit_record = None
+    if fit_data is not None:
+        fit_record = FitLevel(prep_fit, (slice(prep_fit.edge, prep_fit.n - prep_fit.edge),), _split(prep_fit),
+                              _warm(baseline, prep_fit))
     refined = []
     leaders = _leaders(cands, baseline, by_loc, prep, split, warm, scale, bound, settings)
     for k, c in enumerate(leaders, start=1):
