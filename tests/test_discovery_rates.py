@@ -21,7 +21,7 @@ from ident.cli.main import main as ident_main
 from ident.discovery import Channel, Measurement, Settings, discover
 from ident.discovery.catalogue import CAUSES
 from ident.discovery.discover import _set_aside, _split, _warm
-from ident.discovery.search import Candidate, FitLevel, _holds_at, _scaled
+from ident.discovery.search import Candidate, FitLevel, _at_fit_level, _refit_at, _scaled
 from ident.discovery.signals import prepare, within_budget
 
 FS = 20000.0
@@ -222,23 +222,26 @@ def test_with_a_low_level_fit_record_the_cubic_holds_at_both_levels_and_what_bre
 
 
 def test_a_refinement_with_a_fit_record_keeps_only_versions_that_hold_at_its_level(two_levels):
-    """``search._holds_at``, the refinement's rule at the fit record's level: the named cubic holds there (the
-    oscillator's own law), the same cubic 100 times stronger does not (at the low level, a fifth of the force,
-    its force is about four times what the true cubic's is at the high level), and a version that adds nothing
-    to the baseline holds by construction."""
+    """``search._at_fit_level``, the refinement's rule at the fit record's level: the named cubic holds there
+    (the oscillator's own law), the same cubic 100 times stronger does not (at the low level, a fifth of the
+    force, its force is about four times what the true cubic's is at the high level), and a version that
+    adds nothing to the baseline holds by construction; ``_refit_at`` keeps a linear part refitted there
+    only where it simulates that record better."""
     meas, k3, d = two_levels
     cubic = d.findings[0]
     prep_f = prepare(meas[0], d.prep.band)
     fit = FitLevel(prep_f, (slice(prep_f.edge, prep_f.n - prep_f.edge),), _split(prep_f), _warm(d.baseline, prep_f))
     loc = next(loc for loc in d.baseline.locations(prep_f) if loc.name == cubic.location)
-    holds = _holds_at(fit, loc, d.baseline, cubic.baseline or d.baseline, Settings())
+    at_fit = _at_fit_level(fit, loc, d.baseline, Settings())
     shape = {p.name: cubic.parameters[p.name] for p in CAUSES[cubic.cause].shape}
-    assert holds(cubic)
-    assert not holds(_scaled(cubic, cubic.baseline or d.baseline, loc, np.full(len(cubic.elements), np.log(100.0)),
-                             shape))
-    nothing = _holds_at(fit, loc, d.baseline, d.baseline, Settings())
-    assert nothing(replace(cubic, baseline=None, elements=(), output=()))
-    assert _holds_at(None, loc, d.baseline, d.baseline, Settings())(cubic)
+    assert at_fit.error(cubic) <= at_fit.limit
+    strong = _scaled(cubic, cubic.baseline or d.baseline, loc, np.full(len(cubic.elements), np.log(100.0)), shape)
+    assert at_fit.error(strong) > 2 * at_fit.limit
+    nothing = replace(cubic, baseline=None, elements=(), output=())
+    assert at_fit.error(nothing) == pytest.approx(at_fit.limit / (1 + Settings().gain_floor), rel=1e-12)
+    refitted = _refit_at(fit, d.baseline, strong, at_fit)
+    assert at_fit.error(refitted) <= at_fit.error(strong)
+    assert _at_fit_level(None, loc, d.baseline, Settings()).limit == np.inf
 
 
 def test_the_best_candidate_the_fit_record_set_aside_is_said_when_it_gains_more_than_the_answer():
