@@ -1,9 +1,10 @@
-"""``ident bench sweep|discovery|batch|memory``: the benchmarks (printed figures, not tests).
+"""``ident bench sweep|discovery|batch|memory|f16``: the benchmarks (printed figures, not tests).
 
 ``discovery`` is ``ident.cli.bench_discovery`` (hidden-effect cases, on Dask with ``--workers`` or
 ``--scheduler``), ``batch`` is ``ident.cli.bench_batch`` (``ident batch`` on 1 and 2 local workers),
 ``memory`` is ``ident.cli.bench_memory`` (``discover`` on a long record within its memory budget and
-without). Here:
+without), ``f16`` is ``ident.cli.bench_f16`` (``discover`` on the F-16 records and the resonance its answer
+predicts). Here:
 ``sweep``, this project's sparsification sweep against a plain pysindy loop.
 
 Both run the same job on the paper's Table 2 data (Duffing, noise eta = 0.08
@@ -32,6 +33,7 @@ from ..sindy import sweep
 from . import DURATION, RATE_HZ, SEED, number
 from .bench_batch import run_bench as run_batch_bench
 from .bench_discovery import RIG_CASE_S, run_discovery
+from .bench_f16 import run_bench as run_f16_bench
 from .bench_memory import run_bench as run_memory_bench
 from .engine import add_options
 
@@ -41,10 +43,13 @@ TOLERANCE = 0.5  # the same selection rule as ident.sindy.sweep's default
 
 def add_parser(sub) -> None:
     p = sub.add_parser("bench", help="benchmarks (printed ratios, not tests)")
-    p.add_argument("what", choices=["sweep", "discovery", "batch", "memory"],
+    p.add_argument("what", choices=["sweep", "discovery", "batch", "memory", "f16"],
                    help="sweep: ours vs a pysindy fit+simulate loop; discovery: hidden-effect cases; batch: "
                         "ident batch in this process and on 1 and 2 local Dask workers; memory: discover on a long "
-                        "record within its memory budget and as recorded")
+                        "record within its memory budget and as recorded; f16: discover on the F-16 ground "
+                        "vibration test and the resonance its answer predicts")
+    p.add_argument("--data", type=Path,
+                   help="f16: the F-16 benchmark's folder (default ../shared/data/f16_gvt)")
     p.add_argument("--cases", type=number(1, 100_000, integer=True), default=100,
                    help="discovery: number of seeded cases (default 100)")
     p.add_argument("--generator", choices=("independent", "rig"), default="independent",
@@ -106,6 +111,8 @@ def _pysindy_loop(x, xdot, t, f, lambdas, n_rows):
 def run(args) -> int:
     if args.save is not None and args.what != "discovery":
         raise ValueError("--save keeps the discovery benchmark's records; it is for ident bench discovery")
+    if args.data is not None and args.what != "f16":
+        raise ValueError("--data is the F-16 records' folder; it is for ident bench f16")
     if args.what == "discovery":
         if args.duration is not None and args.generator != "rig":
             raise ValueError("--duration sets the rig generator's case length; the independent generator's cases "
@@ -116,6 +123,8 @@ def run(args) -> int:
                              args.duration or RIG_CASE_S, args.twins, args.save)
     if args.what != "memory" and (args.fs_hz is not None or args.max_samples is not None):
         raise ValueError("--fs and --max-samples are for ident bench memory")
+    if args.what == "f16":
+        return run_f16_bench(args.data or Path("../shared/data/f16_gvt"))
     if args.what == "memory":
         return run_memory_bench(args.duration or 120.0, args.fs_hz or 10_000.0, args.max_samples)
     if args.what == "batch":
