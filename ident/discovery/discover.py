@@ -29,9 +29,9 @@ from .catalogue import CAUSES
 from .characterise import characterise
 from .model import NUMERIC_FAILURES
 from .result import Discovery
-from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, block_errors, busiest, choose,
-                     clipped_ranges, clipping_candidates, clustered_p, gain_candidates, offset_findings, paired_p,
-                     pieces_per_block, predict, refine, regress, score, significant, train_error)
+from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, block_errors, busiest,
+                     choose, clipped_ranges, clipping_candidates, clustered_p, gain_candidates, offset_findings,
+                     paired_p, pieces_per_block, predict, refine, regress, score, significant, train_error)
 from .signals import Measurement, Prepared, modal_band, prepare, within_budget
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
