@@ -16,6 +16,7 @@ from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import free_decay
+from ident.discovery.discover import sum_notes
 from ident.discovery.baselines.modal import ModalBaseline, drivable, fit_model, peak_poles, underlying_poles
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import (CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, equivalent_coefficient, force_series,
@@ -676,3 +677,15 @@ def test_a_regression_acts_in_every_mode_with_one_sign():
     assert err[1] < 0.5 * err[0] and alone[0] < 0
     assert np.allclose(one_sign(X2, y2, th2, np.ones(2), positive=False), [alone[0], 0.0], rtol=1e-9)
     assert not np.any(one_sign(X2, y2, th2, np.ones(2), positive=True))
+
+
+def test_a_finding_on_a_pairs_sum_says_what_the_sum_is():
+    """``discover.sum_notes``: a finding at A+B (a pair searched as a sum because the data could not fix the two
+    sensors' signs against each other) gets a note naming both and the two readings; a difference, a single
+    sensor or a location the search did not make gets none."""
+    locs = {n: Location(n, np.array(w, float)) for n, w in
+            (("a2+a3", (0, 1, 1)), ("a2-a3", (0, 1, -1)), ("a2", (0, 1, 0)))}
+    found = [Candidate("hysteretic_joint", n, {}) for n in ("a2+a3", "a2-a3", "a2", "a9")]
+    notes = sum_notes(found, locs, ("a1", "a2", "a3"))
+    assert len(notes) == 1 and notes[0].startswith("a2+a3 is the sum of a2 and a3"), notes
+    assert "relative motion" in notes[0] and "common motion" in notes[0]

@@ -335,7 +335,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         offsets = offset_findings(prep, raw, split, piece, settings)
         sel = Selection(sel.findings + offsets, sel.ambiguous + [[] for _ in offsets],
                         [] if offsets and not sel.findings else sel.reasons)
-    notes = sel.reasons + notes
+    notes = sel.reasons + notes + sum_notes(sel.findings, by_loc, prep.names)
     if n0 > 1.0:  # NRMSE 1 is predicting zero
         notes.append(f"the baseline predicts the held-out blocks worse than predicting zero (NRMSE {n0:.3g}): its "
                      "linear part does not describe this record, and every gain here is measured against it")
@@ -487,6 +487,23 @@ def _hold_at_fit_level(cands: list[Candidate], baseline: Baseline, prep_fit: Pre
 
 
 FIT_BREAK = "breaks the fit record"
+
+
+def sum_notes(findings: list[Candidate], by_loc: dict, names: tuple[str, ...] | list[str]) -> list[str]:
+    """What a finding on a pair's sum means: two responses whose signs the data could not fix against each
+    other (neither is a driving point) are searched as a difference and as a sum (``default_locations``), and
+    the sum is their relative motion only if one of them reads the other way round; with the signs as
+    recorded it is their common motion. A person reading "at A+B" should know which to check."""
+    out = []
+    for f in findings:
+        loc = by_loc.get(f.location)
+        if loc is None or len(loc.responses) != 2 or np.any(loc.weights[list(loc.responses)] < 0):
+            continue
+        a, b = (names[i] for i in loc.responses)
+        out.append(f"{f.location} is the sum of {a} and {b}: the data cannot fix their signs against each other, "
+                   f"so it is the relative motion between them (an interface) if one of the two sensors reads the "
+                   f"other way round, and their common motion if both read as recorded; the mounting tells which")
+    return out
 
 
 def _set_aside(scored: list[Candidate], findings: list[Candidate]) -> list[str]:
