@@ -19,11 +19,10 @@ from argparse import Namespace
 from pathlib import Path
 
 import numpy as np
-from scipy import signal
 
 from ..discovery import discover
 from ..discovery.search import predict
-from ..discovery.signals import prepare
+from ..discovery.signals import frf, prepare
 from .discover import load_measurement
 
 FILES = ("F16Data_FullMSine_Level7.mat", "F16Data_FullMSine_Level1.mat")
@@ -34,10 +33,10 @@ SEGMENT = 8192  # Welch segment: 0.05 Hz at 400 Hz
 
 def h1_peak(u: np.ndarray, y: np.ndarray, fs_hz: float, band: tuple[float, float] = MODE_HZ,
             nperseg: int = SEGMENT) -> tuple[float, float]:
-    """(frequency, |H1|) of the largest |H1| = |S_uy / S_uu| within ``band`` (Hann-windowed Welch estimates)."""
-    f, suu = signal.welch(u, fs_hz, nperseg=min(nperseg, len(u)))
-    _, suy = signal.csd(u, y, fs_hz, nperseg=min(nperseg, len(u)))
-    h = np.abs(suy / np.maximum(suu, 1e-300))
+    """(frequency, |H1|) of the largest |H1| = |S_uy / S_uu| within ``band`` (``signals.frf``: Hann-windowed
+    Welch estimates, segments of ``nperseg``)."""
+    f, H, _ = frf(u, y, fs_hz, nperseg)
+    h = np.abs(H[0])
     k = np.flatnonzero((f >= band[0]) & (f <= band[1]))
     if k.size == 0:
         raise ValueError(f"no frequency line in {band[0]:g}-{band[1]:g} Hz at {fs_hz:g} Hz")

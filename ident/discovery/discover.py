@@ -319,7 +319,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     # fit data: a cause must hold at the other level too (not spoil the baseline's fit there)
     if fit_data is not None:
         say("checking the significant ones at the fit record's level")
-        scored = _hold_at_fit_level(scored, baseline, prep_fit, _warm(baseline, prep_fit), f_min, settings)
+        scored = _hold_at_fit_level(scored, baseline, fit_record, f_min, settings)
 
     sel = _select(findable(scored, fitted_here=rig is None and fit_data is None), baseline, prep, split, sc,
                   settings, char)
@@ -458,14 +458,14 @@ def _leaders(cands: list[Candidate], baseline: Baseline, by_loc: dict, prep: Pre
     return order
 
 
-def _hold_at_fit_level(cands: list[Candidate], baseline: Baseline, prep_fit: Prepared, warm: int, f_min: float,
+def _hold_at_fit_level(cands: list[Candidate], baseline: Baseline, fit: FitLevel, f_min: float,
                        settings: Settings) -> list[Candidate]:
     """With a separate record for the baseline (a low level): a cause must hold there too. A candidate
     the baseline predicts significantly and materially better (by the gain floor) on that record's
     held-out blocks is not significant: an
     amplitude-dependent cause explains the high level without breaking the low one, an
     equivalent-linear change does not."""
-    split_f = _split(prep_fit)
+    prep_fit, split_f, warm = fit.prep, fit.split, fit.warm
     scale_f = np.maximum(prep_fit.measured[split_f.rows("test")].std(axis=0), 1e-300)
     piece = max(16, int(PIECE_PERIODS * prep_fit.fs_hz / f_min))
     e0f, n0f = block_errors(baseline, baseline.model, prep_fit, split_f.test, warm, scale_f, (), np.inf, piece)

@@ -646,9 +646,9 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
                 for onset in ONSETS for fct in (0.5, 1.0, 2.0, 4.0) for lk in (0.0, 1.0, 2.0)]
     starts = [(shape0, 0.0)]
     if grid:
-        scan = sorted(((train_error(baseline, _scaled(c, baseline, loc, np.full(n_el, lk), shp), prep, segs[:2],
-                                    warm, scale, bound), i) for i, (shp, lk) in enumerate(grid)
-                       if holds(_scaled(c, baseline, loc, np.full(n_el, lk), shp))))
+        versions = [_scaled(c, baseline, loc, np.full(n_el, lk), shp) for shp, lk in grid]
+        scan = sorted((train_error(baseline, v, prep, segs[:2], warm, scale, bound), i)
+                      for i, v in enumerate(versions) if holds(v))
         starts = [grid[i] for _, i in scan[:2]] or starts
     for shp, lk in starts:
         free = [k for k in ("gap", "slip") if k in shp]

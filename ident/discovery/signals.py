@@ -112,9 +112,11 @@ def impulsive(u: np.ndarray) -> bool:
     return bool(e[:k].sum() >= 0.9 * e.sum())
 
 
-def frf(u: np.ndarray, Y: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def frf(u: np.ndarray, Y: np.ndarray, fs_hz: float, nperseg: int | None = None
+        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Frequencies, FRF (k, nf) of responses per input, and the input's spectrum (PSD, or |U|^2 of a
-    transient). H1 (Welch) for a stationary input; for a hammer hit the whole record's spectra, Y / U."""
+    transient). H1 (Welch, segments of ``nperseg`` samples, by default ``welch_segment``'s) for a stationary
+    input; for a hammer hit the whole record's spectra, Y / U."""
     u = np.asarray(u, float)
     Y = np.asarray(Y, float).reshape(len(u), -1)
     if impulsive(u):
@@ -124,7 +126,7 @@ def frf(u: np.ndarray, Y: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndar
         Yf = np.fft.rfft(Y - Y.mean(axis=0), nfft, axis=0).T
         puu = np.abs(U) ** 2
         return f, Yf / np.where(puu > 0, U, np.inf), puu
-    nper = welch_segment(len(u), fs_hz)
+    nper = min(nperseg, len(u)) if nperseg else welch_segment(len(u), fs_hz)
     f, puu = welch(u, fs_hz, nperseg=nper)
     H = np.array([csd(u, Y[:, i], fs_hz, nperseg=nper)[1] for i in range(Y.shape[1])])
     return f, H / np.where(puu > 0, puu, np.inf), puu
