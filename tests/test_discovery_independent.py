@@ -17,10 +17,12 @@ import importlib
 
 import numpy as np
 import pytest
+from scipy.signal import butter, sosfiltfilt
 
 from daq.sim.independent.cases import discovery_case
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery import discover
+from ident.discovery.discover import noise_floor
 
 
 @pytest.fixture(scope="module")
@@ -120,3 +122,22 @@ def test_a_linear_algebra_failure_in_the_search_is_a_failed_candidate_not_a_cras
     d = discover(c.measurement)
     assert not d.findings
     assert any("regression failed (SVD did not converge)" in n for n in d.notes)
+
+
+def test_the_noise_floor_is_the_instruments_noise_band_passed_on_the_scored_blocks(cases):
+    # the floor (``ident bench discovery`` prints each baseline against it) recomputed apart: the generator's
+    # noise (recorded minus its noise-free channels), band-passed in the time domain by scipy with the
+    # Butterworth pair whose zero-phase magnitude the discovery's FFT filter uses (high-pass order 2, low-pass
+    # order 4, each forward and backward), its RMS over the held-out blocks over each response's held-out std
+    c, d, _ = cases[1]
+    floor = noise_floor(d, c.measurement, c.reference)
+    p, rows = d.prep, d.split.rows("test")
+    lo, hi = p.band
+    hp, lp = butter(2, lo, "highpass", fs=p.fs_hz, output="sos"), butter(4, hi, "lowpass", fs=p.fs_hz, output="sos")
+    apart = []
+    for i, (ch, ref) in enumerate(zip(c.measurement.responses, c.reference.responses)):
+        noise = sosfiltfilt(lp, sosfiltfilt(hp, np.asarray(ch.values) - np.asarray(ref.values)))
+        apart.append(np.sqrt(np.mean(noise[rows] ** 2)) / p.measured[rows, i].std())
+    assert floor == pytest.approx(np.mean(apart), rel=0.005)  # 6e-5 apart when written
+    # the noise is real and small: the record's SNR was drawn at 20-40 dB, and a model cannot beat it
+    assert 0 < floor < d.baseline_test_nrmse

@@ -33,6 +33,7 @@ from daq.sim.hidden import hidden_case
 from daq.sim.independent.cases import discovery_case
 
 from ..discovery import Channel, Measurement, discover, to_json
+from ..discovery.discover import noise_floor
 from ..discovery.search import Settings, same_sensors
 from ..jsonsafe import finite
 from ..rig import RigParams
@@ -71,6 +72,7 @@ class Case:
     info: str = ""
     clipped: frozenset = frozenset()  # responses the generator's instruments clipped (a true clipping finding)
     strength: float | None = None  # the generator's effect strength: RMS(effect's force) / RMS(static force)
+    reference: Measurement | None = None  # the responses before the instruments' noise (``noise_floor``)
 
 
 @dataclass
@@ -90,6 +92,7 @@ class Verdict:
     baseline_nrmse: float | None = None  # the baseline's held-out NRMSE
     twin: bool = False  # the case run without its effect (``independent_case(seed, twin=True)``)
     strength: float | None = None  # the case's effect strength (``Case.strength``)
+    noise_floor: float | None = None  # the held-out NRMSE the responses' noise alone gives (``noise_floor``)
     record: dict | None = None  # with --save: the case's truth and discover's JSON (``saved_record``)
 
 
@@ -147,6 +150,8 @@ def run_case(args: tuple[str, int, float, bool, bool]) -> Verdict:
                              None, None, time.perf_counter() - t0, case.info, twin=twin, strength=case.strength)
     else:
         v = replace(judge(case, d, time.perf_counter() - t0), twin=twin)
+        if case.reference is not None:
+            v = replace(v, noise_floor=noise_floor(d, case.measurement, case.reference))
     return replace(v, record=saved_record(case, v, d)) if keep else v
 
 
@@ -156,7 +161,7 @@ def saved_record(case: Case, v: Verdict, d) -> dict:
     candidate with its held-out gain, p-value and parameters), so that misses can be studied and selection
     rules tried without running the cases again. ``d`` is None where discover raised."""
     verdict = {k: getattr(v, k) for k in ("named", "location", "right", "extra", "parameter_error", "gain",
-                                          "seconds", "baseline_nrmse")}
+                                          "seconds", "baseline_nrmse", "noise_floor")}
     return finite({"seed": case.seed, "twin": v.twin, "family": case.family, "info": case.info,
                    "truth": {"cause": case.cause, "location": case.location, "strength": case.strength,
                              "parameters": case.truth, "clipped": sorted(case.clipped)},
@@ -210,8 +215,12 @@ def independent_case(seed: int, generated=None, twin: bool = False) -> Case:
             f"{len(t.get('unmeasured_blows') or [])} blows, signs {''.join('+' if v > 0 else '-' for v in t['signs'].values())}")
     clipped = frozenset(n for n, i in t.get("channels", {}).items() if i.get("clipped_fraction", 0.0) > 0)
     strength = t.get("effect_strength") if cause != "none" else None
+    reference = None
+    if all(f"clean:{ch.name}" in c.truth_series for ch in responses):
+        reference = Measurement(m.fs_hz, m.excitation, tuple(
+            Channel(ch.name, ch.kind, np.asarray(c.truth_series[f"clean:{ch.name}"], float)) for ch in responses))
     return Case(seed, c.family, m, None, cause, t.get("location") or "", truth, info, clipped,
-                None if strength is None else float(strength))
+                None if strength is None else float(strength), reference)
 
 
 def report(verdicts: list[Verdict], wall_s: float) -> str:
@@ -238,10 +247,30 @@ def report(verdicts: list[Verdict], wall_s: float) -> str:
             lines.append(f"{c:19s} parameter error median {100 * np.median(errs):.1f} %, max {100 * np.max(errs):.1f} %"
                          f" ({len(errs)} cases); gain median {np.median(gains):.2f}, min {np.min(gains):.2f}")
     lines += by_strength(verdicts)
+    lines += by_floor(verdicts)
     secs = [v.seconds for v in verdicts]
     lines.append(f"run time per case: median {np.median(secs):.1f} s, max {np.max(secs):.1f} s; "
                  f"wall {wall_s:.0f} s")
     return "\n".join(lines)
+
+
+def by_floor(verdicts: list[Verdict]) -> list[str]:
+    """How far each class of case's baseline errs above the response-noise floor (``noise_floor``): near 1
+    no cause can gain (the effect is not in the data as scored); far above it the data hold more than the
+    baseline predicts, and a miss is the method's."""
+    rows = [v for v in verdicts if v.noise_floor and v.baseline_nrmse is not None and np.isfinite(v.baseline_nrmse)]
+    if not rows:
+        return []
+    lines = ["baseline's held-out NRMSE over the responses' noise floor (what no model of the noise-free record "
+             "goes below):"]
+    for label, pick in (("named right", lambda v: v.right and v.cause != "none"),
+                        ("missed", lambda v: not v.right),
+                        ("'none', nothing found", lambda v: v.right and v.cause == "none")):
+        r = np.array([v.baseline_nrmse / v.noise_floor for v in rows if pick(v)])
+        if r.size:
+            lines.append(f"  {label:22s} {r.size:3d} cases: median {np.median(r):5.1f} x (quartiles "
+                         f"{np.percentile(r, 25):.1f}-{np.percentile(r, 75):.1f}, least {r.min():.1f})")
+    return lines
 
 
 STRENGTH_BINS = (0.1, 0.3, 1.0)  # edges of the effect-strength classes ``by_strength`` counts in
@@ -373,6 +402,8 @@ def _print(v: Verdict) -> None:
               f"  [{v.seconds:.0f} s] {'; '.join(v.detail)}  ({v.info})", flush=True)
         return
     mark = "" if v.right else "  WRONG"
+    floor = (f", baseline {v.baseline_nrmse:.3g} = {v.baseline_nrmse / v.noise_floor:.1f} x the noise floor"
+             if v.noise_floor and v.baseline_nrmse is not None else "")
     print(f"case {v.seed:4d} {v.family:12s} {v.cause:18s} -> {v.named:18s} {v.location:10s}"
           f"{'' if v.extra == 0 else f' +{v.extra} extra'}{mark}  [{v.seconds:.0f} s] {'; '.join(v.detail)}"
-          f"  ({v.info})", flush=True)
+          f"  ({v.info}{floor})", flush=True)

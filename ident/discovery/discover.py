@@ -32,7 +32,7 @@ from .result import Discovery
 from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, block_errors, busiest,
                      choose, clipped_ranges, clipping_candidates, clustered_p, gain_candidates, offset_findings,
                      paired_p, pieces_per_block, predict, refine, regress, score, significant, train_error)
-from .signals import Measurement, Prepared, modal_band, prepare, within_budget
+from .signals import ORDER, Channel, Measurement, Prepared, convert, modal_band, prepare, within_budget
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
 
@@ -176,6 +176,34 @@ def _within_budget(m: Measurement, fit_data: Measurement | None, train: slice | 
         fit_data = fx.measurement
         notes += [f"fit data: {n}" for n in fx.notes]
     return ex.measurement, fit_data, train, test, notes
+
+
+def noise_floor(d: Discovery, m: Measurement, reference: Measurement, settings: Settings = Settings()) -> float:
+    """The held-out NRMSE that the responses' difference from ``reference`` alone gives, on the blocks, the
+    band and the scale ``d`` (``discover`` on ``m``) was scored with: what no model of ``reference`` can go
+    below, so that 1 - floor / ``d.baseline_test_nrmse`` bounds the gain any cause could show.
+
+    ``reference`` is ``m`` as its instruments saw it before their noise, range and quantisation (a generator
+    knows it; a lab does not). Only the responses' noise is counted, not what the excitation's noise
+    drives through a model, and a clipped response's clipping counts as noise: a floor, not the error of
+    the best model. The difference is taken as recorded, then decimated and cut as ``discover`` analysed
+    ``m`` and band-passed alike (every step linear); signs do not change an RMS."""
+    if reference.n != m.n or reference.fs_hz != m.fs_hz or [c.kind for c in reference.responses] != [
+            c.kind for c in m.responses]:
+        raise ValueError("the reference must be the record's responses, sample for sample, in the same kinds")
+    diff = Measurement(m.fs_hz, m.excitation, tuple(
+        Channel(c.name, c.kind, np.asarray(c.values, float) - np.asarray(r.values, float))
+        for c, r in zip(m.responses, reference.responses)), m.start_s)
+    ex = within_budget(m, settings.max_samples)
+    if ex.step > 1:  # decimated alike (by the step alone: the span is cut below, as the record's was)
+        diff = within_budget(diff, np.iinfo(np.int64).max, step=ex.step).measurement
+    a = ex.start // ex.step
+    p = d.prep
+    rows = d.split.rows("test")
+    noise = np.column_stack([convert(np.asarray(c.values, float)[a:a + p.n], p.fs_hz, p.band, ORDER[c.kind],
+                                     ORDER[c.kind]) for c in diff.responses])
+    scale = np.maximum(p.measured[rows].std(axis=0), 1e-300)
+    return float(np.mean(np.sqrt(np.mean(noise[rows] ** 2, axis=0)) / scale))
 
 
 def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | None, train: slice | None,

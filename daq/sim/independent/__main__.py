@@ -1,9 +1,10 @@
 """``python -m daq.sim.independent campaign OUT_DIR --cases N --seed S``: write a campaign of cases.
 
 Case i uses seed S + i, so any case can be regenerated alone. OUT_DIR must be missing or empty; each
-case gets a folder NNN_seedS_family_cause (case.csv, truth.json, and truth.csv for regime cases), and
-campaign.json lists them. With ``--twins`` each discovery case's twin (the same draws without the
-effect) follows it in a folder NNN_seedS_family_none_twin.
+case gets a folder NNN_seedS_family_cause (case.csv, truth.json, and truth.csv: a regime case's per-sample
+regimes, a discovery case's channels before their sensors' noise), and campaign.json lists them. With
+``--twins`` each discovery case's twin (the same draws without the effect) follows it in a folder
+NNN_seedS_family_none_twin.
 """
 
 from __future__ import annotations

@@ -428,10 +428,12 @@ def _finish(rng: np.random.Generator, draft: Draft, cause: str, seed: int, twin:
     card = draws.draw_card(rng, draft.fs_hz)
     columns = {"t": np.arange(r.n_out) / draft.fs_hz}
     kinds, units, instruments = {"t": "time"}, {"t": "s"}, {}
+    clean = {"t": columns["t"]}  # each channel as its instrument saw it before noise, range and quantisation
     for name, kind in draft.channels:
         ch = draws.draw_channel(rng, kind)
         acq = acquire(r.outputs[name], r.rate_hz, card, ch, r.n_out, rng)
         columns[name], kinds[name], units[name], instruments[name] = acq.values, kind, UNITS[kind], acq.info
+        clean[f"clean:{name}"] = acq.clean
     exc_col = draft.excitation.split(":")[0]
     truth |= {"seed": seed, "signs": {c: instruments[c]["sign"] for c in instruments},
               "snr_db": {c: instruments[c]["snr_db_achieved"] for c in instruments},
@@ -442,7 +444,8 @@ def _finish(rng: np.random.Generator, draft: Draft, cause: str, seed: int, twin:
               "excitation_signal": {"kind": draft.signal_kind,
                                     **{d.name: d.signal.describe() for d in setup.drives if d.name in draft.scaled}},
               "unmeasured_blows": draft.blows}
-    return Case(family=draft.family, fs_hz=float(draft.fs_hz), columns=columns, kinds=kinds, units=units, truth=truth)
+    return Case(family=draft.family, fs_hz=float(draft.fs_hz), columns=columns, kinds=kinds, units=units, truth=truth,
+                truth_series=clean)
 
 
 def _truth(draft: Draft, cause: str, params: dict, generic: dict, r: Run, stats: dict, rate: int) -> dict:

@@ -37,7 +37,9 @@ class Case:
     kinds: dict[str, str]
     units: dict[str, str]
     truth: dict
-    truth_series: dict[str, np.ndarray] = field(default_factory=dict)  # per-sample truth, "t" first
+    # per-sample truth, "t" first: a regime case's contact flags and regimes; a discovery case's channels
+    # before their sensor noise, range and quantisation ("clean:<column>")
+    truth_series: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self):
         names = list(self.columns)
