@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from daq.sim.hidden import hidden_case
-from ident.cli.bench_discovery import Case, Verdict, by_strength, judge, report, twin_report
+from ident.cli.bench_discovery import Case, Verdict, by_floor, by_strength, judge, report, twin_report
 from ident.cli.discover import stage_printer
 from ident.discovery import Channel, Measurement, discover
 from ident.discovery.baselines.rig import RigBaseline
@@ -220,6 +220,25 @@ def test_the_report_counts_right_answers_per_class_of_effect_strength():
     assert lines[3].split() == ["cubic_stiffness", "-", "1/1", "-", "-"]
     assert len(lines) == 4 and "\n".join(lines) in report(verdicts, 1.0)
     assert by_strength([v("contact", "contact", True, None)]) == []  # the rig generator's cases carry none
+
+
+def test_the_report_sets_each_baseline_against_its_noise_floor():
+    """Baselines over floors: two right (4 and 10 x), two 'none' cases (1.5 and 3 x), three misses (2, 6 and
+    20 x: two beyond the largest 'none' case), and a rig-generator case without a floor, left out."""
+    def v(cause, right, nrmse, floor):
+        return Verdict(1, "rig_base", cause, cause if right else "nothing", "", right, 0, None, None, 1.0,
+                       baseline_nrmse=nrmse, noise_floor=floor)
+    verdicts = [v("contact", True, 0.4, 0.1), v("cubic_stiffness", True, 0.1, 0.01), v("none", True, 0.03, 0.02),
+                v("none", True, 0.06, 0.02), v("contact", False, 0.2, 0.1), v("quadratic_damping", False, 0.06, 0.01),
+                v("hysteretic_joint", False, 0.4, 0.02), v("contact", False, 0.3, None)]
+    lines = by_floor(verdicts)
+    assert lines[1].split() == ["named", "right", "2", "cases:", "median", "7.0", "x", "(quartiles", "5.5-8.5,",
+                                "least", "4.0)"]
+    assert lines[2].split()[:6] == ["missed", "3", "cases:", "median", "6.0", "x"]
+    assert lines[3].split()[:7] == ["'none',", "nothing", "found", "2", "cases:", "median", "2.2"]
+    assert lines[4] == "  misses beyond every 'none' case (3.0 x): 2/3"
+    assert "\n".join(lines) in report(verdicts, 1.0)
+    assert by_floor([v("contact", True, 0.4, None)]) == []
 
 
 def test_a_clipping_found_where_the_generator_clipped_is_not_a_false_finding():

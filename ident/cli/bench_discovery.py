@@ -270,6 +270,13 @@ def by_floor(verdicts: list[Verdict]) -> list[str]:
         if r.size:
             lines.append(f"  {label:22s} {r.size:3d} cases: median {np.median(r):5.1f} x (quartiles "
                          f"{np.percentile(r, 25):.1f}-{np.percentile(r, 75):.1f}, least {r.min():.1f})")
+    # a linear baseline errs this far above the floor on records with nothing hidden: a miss beyond every one
+    # of them is a record that holds what the baseline misses
+    free = [v.baseline_nrmse / v.noise_floor for v in rows if v.cause == "none"]
+    missed = [v.baseline_nrmse / v.noise_floor for v in rows if not v.right and v.cause != "none"]
+    if free and missed:
+        lines.append(f"  misses beyond every 'none' case ({max(free):.1f} x): {sum(r > max(free) for r in missed)}"
+                     f"/{len(missed)}")
     return lines
 
 
