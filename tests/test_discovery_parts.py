@@ -582,7 +582,7 @@ def test_a_joints_truth_is_the_stiffness_it_loses_when_every_element_slips():
                                                                      for i, k in enumerate(("base", "tip1"))},
                                 truth={"excitation": "base:base_acceleration", "responses": ["tip1:acceleration"],
                                        "equivalent": eq, "effect": effect, "cause": "friction_joint",
-                                       "location": "tip1", "signs": {"tip1": 1}})
+                                       "location": "tip1", "signs": {"tip1": 1}}, truth_series={})
     c = independent_case(0, generated)
     assert c.truth["stiffness_per_mass"] == pytest.approx(25.0)
     assert c.truth["slip"] == pytest.approx(4e-3)
