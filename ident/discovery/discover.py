@@ -187,7 +187,8 @@ def noise_floor(d: Discovery, m: Measurement, reference: Measurement, settings: 
     knows it; a lab does not). Only the responses' noise is counted, not what the excitation's noise
     drives through a model, and a clipped response's clipping counts as noise: a floor, not the error of
     the best model. The difference is taken as recorded, then decimated and cut as ``discover`` analysed
-    ``m`` and band-passed alike (every step linear); signs do not change an RMS."""
+    ``m`` (given no ``train`` or ``test`` slice) and band-passed alike (every step linear); signs do not
+    change an RMS."""
     if reference.n != m.n or reference.fs_hz != m.fs_hz or [c.kind for c in reference.responses] != [
             c.kind for c in m.responses]:
         raise ValueError("the reference must be the record's responses, sample for sample, in the same kinds")
