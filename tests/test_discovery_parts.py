@@ -16,7 +16,7 @@ from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import free_decay
-from ident.discovery.discover import sum_notes
+from ident.discovery.discover import noise_floor, sum_notes
 from ident.discovery.baselines.modal import ModalBaseline, drivable, fit_model, peak_poles, underlying_poles
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import (CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, equivalent_coefficient, force_series,
@@ -26,7 +26,7 @@ from ident.discovery.result import Discovery
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
 from ident.discovery.search import (Candidate, Settings, choose, clustered_p, one_sign, paired_p, pieces_per_block,
                                     predict, signed_rank_p)
-from ident.discovery.signals import convert, frf, impulsive, miso_frf, prepare
+from ident.discovery.signals import convert, frf, impulsive, miso_frf, prepare, within_budget
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
 
@@ -689,3 +689,29 @@ def test_a_finding_on_a_pairs_sum_says_what_the_sum_is():
     notes = sum_notes(found, locs, ("a1", "a2", "a3"))
     assert len(notes) == 1 and notes[0].startswith("a2+a3 is the sum of a2 and a3"), notes
     assert "relative motion" in notes[0] and "common motion" in notes[0]
+
+
+def test_the_noise_floor_follows_a_decimated_and_cut_record_sample_for_sample():
+    """A record over its memory budget is decimated and cut before it is analysed; the floor must take the
+    difference from its reference through the same steps, aligned. Responses that read (1 + eps) times the
+    reference differ from it by eps / (1 + eps) of what is analysed, so on any blocks the floor is
+    eps / (1 + eps) times each response's RMS over its std there (analytic). The amplitudes ramp over the
+    record, so a difference taken from the record's start instead of the cut's misses it."""
+    fs, n, eps = 2000.0, 120_000, 0.05
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=n)
+    ref = np.column_stack([np.sin(2 * np.pi * 7 * t) * (1 + t / t[-1]) + 0.3 * np.sin(2 * np.pi * 13.1 * t),
+                           np.cos(2 * np.pi * 9.3 * t) * (2 - t / t[-1])])
+    m, reference = (Measurement(fs, Channel("force", "force", u), (Channel("a1", "acceleration", y[:, 0]),
+                                                                   Channel("a2", "acceleration", y[:, 1])))
+                    for y in ((1 + eps) * ref, ref))
+    settings = Settings(max_samples=20_000)
+    ex = within_budget(m, settings.max_samples)
+    assert ex.step > 1 and ex.start > 0  # decimated and cut
+    p = prepare(ex.measurement, (2.0, 30.0))
+    split = interleaved(p.n, p.edge, int(2 * p.fs_hz))
+    d = SimpleNamespace(prep=p, split=split)  # what noise_floor reads of a Discovery
+    rows = split.rows("test")
+    expected = eps / (1 + eps) * np.mean(np.sqrt(np.mean(p.measured[rows] ** 2, axis=0)) / p.measured[rows].std(axis=0))
+    assert noise_floor(d, m, reference, settings) == pytest.approx(expected, rel=1e-6)
