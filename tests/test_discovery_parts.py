@@ -26,7 +26,7 @@ from ident.discovery.result import Discovery
 from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
 from ident.discovery.search import (Candidate, Settings, choose, clustered_p, one_sign, paired_p, pieces_per_block,
                                     predict, signed_rank_p)
-from ident.discovery.signals import convert, frf, impulsive, miso_frf, prepare, within_budget
+from ident.discovery.signals import convert, first_family, frf, impulsive, miso_frf, prepare, within_budget
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
 
@@ -228,6 +228,19 @@ def test_a_strong_start_is_worth_its_share_of_the_modes_stiffness_or_damping(cau
         assert -np.sum(f * z) / np.sum(z * z) == pytest.approx(level * w**2, rel=1e-3)
     else:
         assert np.sum(f * v) / np.sum(v * v) == pytest.approx(level * 2 * zeta * w, rel=1e-3)
+
+
+@pytest.mark.parametrize("upper, kept", [(0.0, [10.0, 12.0]), (1.0, [10.0, 12.0]), (2.4, [10.0, 12.0, 100.0])])
+def test_a_second_family_of_modes_is_left_out_only_where_the_motion_is_not(upper, kept):
+    # sines on whole periods at both sensors: the first family's mean square is 1, a sine of amplitude a at
+    # 100 Hz adds a^2 / 2, so the share above the gap's geometric middle (34.6 Hz) is 0, 1/3 and 0.74
+    fs, n = 1000.0, 4000
+    t = np.arange(n) / fs
+    z = np.sin(2 * np.pi * 10 * t) + np.sin(2 * np.pi * 12 * t + 1.0) + upper * np.sin(2 * np.pi * 100 * t)
+    assert first_family(np.array([12.0, 100.0, 10.0]), np.column_stack([z, -3.0 * z]), fs).tolist() == kept
+    # modes closer than the gap (a chain's; a clamped-clamped beam's second at 2.76 times its first) are
+    # one family whatever the motion
+    assert first_family(np.array([10.0, 27.6, 59.0]), z[:, None], fs).tolist() == [10.0, 27.6, 59.0]
 
 
 def test_band_limited_conversion_of_a_sine_is_exact_in_the_band():

@@ -32,7 +32,8 @@ from .result import Discovery
 from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, block_errors, busiest,
                      choose, clipped_ranges, clipping_candidates, clustered_p, gain_candidates, offset_findings,
                      paired_p, pieces_per_block, predict, refine, regress, score, significant, train_error)
-from .signals import ORDER, Channel, Measurement, Prepared, convert, modal_band, prepare, within_budget
+from .signals import (ORDER, Channel, Measurement, Prepared, convert, first_family, modal_band, prepare,
+                      within_budget)
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
 
@@ -68,6 +69,9 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
                          f"{prep0.band[0]:.3g}-{prep0.band[1]:.3g} Hz")
     # the shorter record's duration bounds the low edge (the two may be at different rates)
     n = min(m.n, src.n if src.fs_hz == m.fs_hz else int(round(src.n * m.fs_hz / src.fs_hz)))
+    # a second family of modes far above the first is left out where the motion is not there (``first_family``)
+    f = first.model.frequencies_hz
+    light &= np.isin(f, first_family(f[light], prep0.zva[0][prep0.edge:-prep0.edge], prep0.fs_hz))
     return modal_band(first.model.frequencies_hz[light], m.fs_hz, n), first.model.poles[light]
 
 
