@@ -102,7 +102,38 @@ def _fit_in_band(prep: Prepared, split: Split, poles0: np.ndarray) -> ModalBasel
                 poles0 = searched
         except NUMERIC_FAILURES:
             pass
-    return ModalBaseline.fit(prep, split.rows("train"), poles0=poles0)
+    return _without_devices(ModalBaseline.fit(prep, split.rows("train"), poles0=poles0), prep, split)
+
+
+def _without_devices(fitted: ModalBaseline, prep: Prepared, split: Split) -> ModalBaseline:
+    """The baseline fitted again without its overdamped poles above the band (zeta > 0.5: no mode of the
+    band, a device of the fit, often pinned at the admissible 0.49 fs) when, fitted on two thirds of the
+    training blocks, the model without them simulates the third left out (as the held-out blocks are
+    scored: free run from the state read off the data) with 10 % less error.
+
+    Such a pole cut the fit's error and the error from the measured input alone on the left-out blocks,
+    and still let the free runs wander (independent seed 53, a Coulomb friction at tip 2: 165 Hz at
+    zeta 1, held out at 0.41; without it 0.09). Removed without the check it made other baselines worse
+    (seed 42: 0.17 -> 0.49), as removing the overdamped poles below the band does (the drift of integrated
+    accelerations they fit: seeds 44, 58, 67)."""
+    p = fitted.model.poles
+    device = (-p.real / np.abs(p) > 0.5) & (np.abs(p) / (2 * np.pi) > prep.band[1])
+    check = split.train[2::3]
+    if not device.any() or device.all() or not check:
+        return fitted
+    rows = rows_of([s for s in split.train if s not in check])
+    scale = np.maximum(prep.measured[rows_of(check)].std(axis=0), 1e-300)
+    bound = 50.0 * float(np.max(np.abs(prep.zva[0]))) + 1e-300
+    try:
+        errs = []
+        for poles in (p, p[~device]):
+            b = ModalBaseline.fit(prep, rows, poles0=poles)
+            errs.append(block_errors(b, b.model, prep, check, _warm(b, prep), scale, (), bound)[1])
+        if errs[1] < 0.9 * errs[0]:
+            return ModalBaseline.fit(prep, split.rows("train"), poles0=p[~device])
+    except NUMERIC_FAILURES:
+        pass
+    return fitted
 
 
 def _split(prep: Prepared, train: slice | None = None, test: slice | None = None) -> Split:
