@@ -71,7 +71,7 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
     n = min(m.n, src.n if src.fs_hz == m.fs_hz else int(round(src.n * m.fs_hz / src.fs_hz)))
     # a second family of modes far above the first is left out where the motion is not there (``first_family``)
     f = first.model.frequencies_hz
-    light &= np.isin(f, first_family(f[light], prep0.zva[0][prep0.edge:-prep0.edge], prep0.fs_hz))
+    light &= np.isin(f, first_family(f[light], prep0.zva[0][prep0.edge:prep0.n - prep0.edge], prep0.fs_hz))
     return modal_band(first.model.frequencies_hz[light], m.fs_hz, n), first.model.poles[light]
 
 

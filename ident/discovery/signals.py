@@ -206,7 +206,7 @@ def first_family(frequencies_hz: np.ndarray, displacement: np.ndarray, fs_hz: fl
     hammer drives) adds four and a half times its frequency of band and the modal fit's error there
     (independent seed 68, a drag at tip 1 of a force-excited rig: the first fit found the 100-Hz pair,
     the band reached 450 Hz and the baseline held out at 0.48; in the first family's band, 3.6-43 Hz,
-    0.16, and the drag was found). A record driven mostly at the second family keeps it: its motion is
+    0.17, and the drag was found). A record driven mostly at the second family keeps it: its motion is
     there."""
     f = np.sort(np.asarray(frequencies_hz, float))
     gaps = np.flatnonzero(f[1:] > FAMILY_GAP * f[:-1])
