@@ -20,7 +20,7 @@ from daq.sim.independent.cases import discovery_case
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery import discover
 from ident.discovery.baselines.modal import ModalBaseline
-from ident.discovery.search import block_errors
+from ident.discovery.search import block_errors, simulation_bound
 from ident.discovery.signals import prepare
 from ident.discovery.split import Split
 
@@ -219,6 +219,6 @@ def test_an_overdamped_pole_above_the_band_that_lets_the_free_runs_wander_is_dro
     device = (-q.real / np.abs(q) > 0.5) & (np.abs(q) / (2 * np.pi) > band[1])
     assert device.sum() == 1 and abs(abs(q[device][0]) / (2 * np.pi) - 165.2) < 1.0
     scale = np.maximum(prep.measured[split.rows("test")].std(axis=0), 1e-300)
-    bound = 50.0 * float(np.max(np.abs(prep.zva[0])))
+    bound = simulation_bound(prep)
     errors = [block_errors(b, b.model, prep, split.test, D._warm(b, prep), scale, (), bound)[1] for b in (base, kept)]
     assert errors[0] < 0.15 and errors[1] > 2 * errors[0]

@@ -31,7 +31,8 @@ from .model import NUMERIC_FAILURES
 from .result import Discovery
 from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, block_errors, busiest,
                      choose, clipped_ranges, clipping_candidates, clustered_p, gain_candidates, offset_findings,
-                     paired_p, pieces_per_block, predict, refine, regress, score, significant, train_error)
+                     paired_p, pieces_per_block, predict, refine, regress, score, significant, simulation_bound,
+                     train_error)
 from .signals import (ORDER, Channel, Measurement, Prepared, convert, first_family, modal_band, prepare,
                       within_budget)
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
@@ -75,11 +76,18 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
     return modal_band(first.model.frequencies_hz[light], m.fs_hz, n), first.model.poles[light]
 
 
-def _held_back(segs: list[slice]) -> tuple[np.ndarray, np.ndarray | None]:
-    """The rows a modal fit is fitted on and the rows its order is chosen on: every third block held back
-    (None with fewer than three blocks, where the fit error chooses)."""
+def _left_out(segs: list[slice]) -> tuple[list[slice], list[slice]]:
+    """The blocks a modal fit is fitted on and those its choices are checked on: every third block held
+    back (none with fewer than three blocks)."""
     check = segs[2::3] if len(segs) >= 3 else []
-    return rows_of([s for s in segs if s not in check]), (rows_of(check) if check else None)
+    return [s for s in segs if s not in check], check
+
+
+def _held_back(segs: list[slice]) -> tuple[np.ndarray, np.ndarray | None]:
+    """``_left_out``'s blocks as rows (None for the check with fewer than three blocks, where the fit error
+    chooses the order)."""
+    fit, check = _left_out(segs)
+    return rows_of(fit), (rows_of(check) if check else None)
 
 
 def _fit_in_band(prep: Prepared, split: Split, poles0: np.ndarray) -> ModalBaseline:
@@ -118,12 +126,12 @@ def _without_devices(fitted: ModalBaseline, prep: Prepared, split: Split) -> Mod
     accelerations they fit: seeds 44, 58, 67)."""
     p = fitted.model.poles
     device = (-p.real / np.abs(p) > 0.5) & (np.abs(p) / (2 * np.pi) > prep.band[1])
-    check = split.train[2::3]
+    fit_blocks, check = _left_out(split.train)
     if not device.any() or device.all() or not check:
         return fitted
-    rows = rows_of([s for s in split.train if s not in check])
+    rows = rows_of(fit_blocks)
     scale = np.maximum(prep.measured[rows_of(check)].std(axis=0), 1e-300)
-    bound = 50.0 * float(np.max(np.abs(prep.zva[0]))) + 1e-300
+    bound = simulation_bound(prep)
     try:
         errs = []
         for poles in (p, p[~device]):
@@ -270,7 +278,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         else:
             baseline = _fit_in_band(prep, split, poles0)
     warm = _warm(baseline, prep)
-    bound = 50.0 * float(np.max(np.abs(prep.zva[0]))) + 1e-300
+    bound = simulation_bound(prep)
 
     # unmodelled transients: isolated bursts of the baseline's error. Each block is predicted from the
     # state read off the data before it, so a blow's burst ends with the block it strikes in; predicted

@@ -151,6 +151,11 @@ class Scoring:
     piece: int  # samples per piece of the paired test
 
 
+def simulation_bound(prep: Prepared) -> float:
+    """The displacement beyond which a simulation counts as diverged: 50 times the record's largest."""
+    return 50.0 * float(np.max(np.abs(prep.zva[0]))) + 1e-300
+
+
 def block_errors(baseline: Baseline, model: LinearModel, prep: Prepared, segs, warm: int, scale: np.ndarray,
                  output: tuple = (), bound: float = np.inf, piece: int = 0) -> tuple[np.ndarray, float]:
     """NRMSE per piece (mean over responses of RMS error / the response's held-out std) and over all
@@ -702,7 +707,7 @@ def _at_fit_level(fit: FitLevel | None, loc: Location, base0: Baseline, settings
         return AtFitLevel(lambda cand: 0.0, np.inf)
     busy = busiest(fit.prep, fit.split, loc.weights, settings.refine_blocks)
     scale_f = np.maximum(fit.prep.measured[rows_of(busy)].std(axis=0), 1e-300)
-    bound_f = 50.0 * float(np.max(np.abs(fit.prep.zva[0]))) + 1e-300
+    bound_f = simulation_bound(fit.prep)
     _, e0 = block_errors(base0, base0.model, fit.prep, busy, fit.warm, scale_f, (), bound_f)
     return AtFitLevel(lambda cand: train_error(base0, cand, fit.prep, busy, fit.warm, scale_f, bound_f),
                       (1.0 + settings.gain_floor) * e0)
