@@ -16,7 +16,7 @@ from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import free_decay
-from ident.discovery.discover import noise_floor, sum_notes
+from ident.discovery.discover import _warm, noise_floor, sum_notes
 from ident.discovery.baselines.modal import ModalBaseline, drivable, fit_model, peak_poles, underlying_poles
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import (CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, equivalent_coefficient, force_series,
@@ -728,3 +728,19 @@ def test_the_noise_floor_follows_a_decimated_and_cut_record_sample_for_sample():
     rows = split.rows("test")
     expected = eps / (1 + eps) * np.mean(np.sqrt(np.mean(p.measured[rows] ** 2, axis=0)) / p.measured[rows].std(axis=0))
     assert noise_floor(d, m, reference, settings) == pytest.approx(expected, rel=1e-6)
+
+
+def test_the_warm_up_before_a_block_ignores_a_pole_below_the_band():
+    # a modal fit's device for drift (0.19 Hz, below a 4.8-Hz band edge, as independent seed 30's fit
+    # held) must not set the warm-up: three periods of the band's low edge, 625 samples at 1 kHz, not
+    # three of the drift pole's (15.8 s); a model whose slowest mode is in the band keeps its own
+    fs = 1000.0
+    t = np.arange(20000) / fs
+    u = np.sin(2 * np.pi * 13.0 * t)
+    prep = prepare(Measurement(fs, Channel("a0", "base_acceleration", u), (Channel("tip1", "acceleration", u),)), (4.8, 58.0))
+    def base(*f_hz):
+        lam = np.array([-0.02 * 2 * np.pi * f + 2j * np.pi * f for f in f_hz])
+        return ModalBaseline(LinearModel(lam, np.ones((1, lam.size), complex), np.ones((1, lam.size), complex)), None)
+    assert _warm(base(0.19, 12.0), prep) == max(prep.edge, int(3.0 / 4.8 * fs)) == 625
+    in_band = base(6.0, 12.0)
+    assert _warm(in_band, prep) == int(3.0 / in_band.model.frequencies_hz.min() * fs) in (499, 500)
