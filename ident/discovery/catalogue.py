@@ -85,7 +85,8 @@ CAUSES: dict[str, Cause] = {c.name: c for c in (
           (Parameter("stiffness_per_mass", "1/s^2", "stopper stiffness per modal mass"),),
           (Parameter("gap", "m", "clearance to the stopper at the location"),
            Parameter("side", "", "both, positive or negative")),
-          separates_by="a stepped sine whose levels straddle the gap: a contact switches on at one amplitude"),
+          separates_by="a stepped sine whose levels straddle the gap: a contact switches on at one amplitude",
+          starts=(1.0, 10.0, 100.0)),
     Cause("cubic_stiffness", CUBIC, (Parameter("coefficient_per_mass", "1/(m^2 s^2)", "k3 per modal mass"),),
           positive=False, backbone_power=2.0,
           separates_by="a stepped sine at three or more levels: a cubic's frequency shift grows with amplitude^2"),
@@ -225,9 +226,11 @@ def equivalent_coefficient(cause: Cause, level: float, omega: float, zeta: float
     """The coefficient whose linear equivalent is ``level`` times a mode's stiffness or damping per unit
     modal mass (omega^2, 2 zeta omega), on a sinusoid of velocity amplitude sqrt(2) v_rms (first-order
     describing functions, Worden & Tomlinson 2001, ch. 2): a joint that has fully slipped has lost its
-    stiffness k; drag c2 v|v| damps like 8 c2 V / (3 pi); dry friction F like 4 F / (pi V)."""
+    stiffness k; drag c2 v|v| damps like 8 c2 V / (3 pi); dry friction F like 4 F / (pi V). A stopper's
+    stiffness is taken as that share of the mode's stiffness itself: no describing function, only a
+    start (its equivalent stiffness depends on how far beyond the gap the motion goes)."""
     v = np.sqrt(2.0) * v_rms
-    if cause.code == JOINT:
+    if cause.code == JOINT or cause.code == CONTACT:
         return level * omega**2
     if cause.code == QDAMP:
         return level * 2 * zeta * omega * 3 * np.pi / (8 * v) if v > 0 else 0.0

@@ -584,7 +584,7 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
            fit: FitLevel | None = None) -> Candidate:
     """Refine a mechanical candidate by simulation error on the busiest training blocks: a baseline fitted
     to this record is first refitted jointly with it (``joint_refit``, if ``joint``; a joint, a drag or a
-    dry friction also from strong starts, ``_strong_starts``); a baseline fitted
+    dry friction or a stopper also from strong starts, ``_strong_starts``); a baseline fitted
     to a separate record (``fit``: its preparation and segments, a low level) is refitted there with the
     candidate in place, before and after the refinement (the cause acts at the low level too: the linear
     part fitted there without it holds the cause's equivalent stiffness and damping twice, and every version
