@@ -208,12 +208,12 @@ def test_iwan_joint_dissipates_the_analytic_energy_per_cycle(onset):
     assert area == pytest.approx(expected, rel=2e-3)
 
 
-@pytest.mark.parametrize("cause", ["quadratic_damping", "coulomb_friction", "hysteretic_joint"])
+@pytest.mark.parametrize("cause", ["quadratic_damping", "coulomb_friction", "hysteretic_joint", "contact"])
 def test_a_strong_start_is_worth_its_share_of_the_modes_stiffness_or_damping(cause):
     # the refit's strong starts (search._strong_starts): the coefficient whose first harmonic on a sinusoid
     # of the RMS velocity is the given share of the mode's damping 2 zeta w (drag, dry friction) or of its
-    # stiffness w^2 (a joint that has slipped through), read here off the kernel's own force by projecting
-    # it on the velocity or the displacement over whole cycles
+    # stiffness w^2 (a joint that has slipped through, a stopper at no gap), read here off the kernel's own
+    # force by projecting it on the velocity or the displacement over whole cycles
     w, zeta, level, v_rms = 2 * np.pi * 12.0, 0.02, 0.7, 0.05
     amp = np.sqrt(2) * v_rms
     c = CAUSES[cause]
@@ -221,11 +221,14 @@ def test_a_strong_start_is_worth_its_share_of_the_modes_stiffness_or_damping(cau
     t = np.linspace(0, 4 * 2 * np.pi / w, 400001)
     v = amp * np.cos(w * t)
     z = amp / w * np.sin(w * t)
-    shape = {"eps": 1e-6 * amp} if cause == "coulomb_friction" else {"slip": 1e-4 * amp / w, "onset": 0.0}
+    shape = {"coulomb_friction": {"eps": 1e-6 * amp}, "contact": {"gap": 0.0, "side": "both"}}.get(
+        cause, {"slip": 1e-4 * amp / w, "onset": 0.0})
     p = law_parameters(c, shape) * np.r_[coef, np.ones(3)]
     f = force_series(c.code, p, z, v)
     if cause == "hysteretic_joint":  # the force takes stiffness away: -k z once every element slips
         assert -np.sum(f * z) / np.sum(z * z) == pytest.approx(level * w**2, rel=1e-3)
+    elif cause == "contact":  # a stopper on each side at no gap is a spring k z
+        assert np.sum(f * z) / np.sum(z * z) == pytest.approx(level * w**2, rel=1e-3)
     else:
         assert np.sum(f * v) / np.sum(v * v) == pytest.approx(level * 2 * zeta * w, rel=1e-3)
 
