@@ -384,7 +384,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     if fitted_here:
         # a linear mismatch is no finding against a model fitted to this record (``findable``): it keeps its
         # place among the leaders (so the others refined stay the same) but is not refined. Its refinement
-        # was the dearest of all: a spring as stiff as the search likes makes the integrator take 64 steps a
+        # was the dearest of all: a spring stiff enough that the integrator takes its cap of 64 sub-steps a
         # sample, 98 of the 163 s of independent seed 2's run, for a candidate that cannot be chosen
         leaders = [c for c in leaders if c.cause != "linear_mismatch"]
     for k, c in enumerate(leaders, start=1):
@@ -406,8 +406,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         say("checking the significant ones at the fit record's level")
         scored = _hold_at_fit_level(scored, baseline, fit_record, f_min, settings)
 
-    sel = _select(findable(scored, fitted_here=fitted_here), baseline, prep, split, sc,
-                  settings, char)
+    sel = _select(findable(scored, fitted_here=fitted_here), baseline, prep, split, sc, settings, char)
     notes += _set_aside(scored, sel.findings)
     ext_model, ext_out, ext_err, ext_blocks = baseline.model, (), n0, e0
     if sel.findings:
@@ -472,8 +471,8 @@ def findable(scored: list[Candidate], fitted_here: bool) -> list[Candidate]:
     fitted to this very record (``fitted_here``). Such a model was fitted to these data by least squares;
     a linear change that predicts them better is the fit's own imperfection, not a cause (independent
     seed 32's twin, a linear record: a linear mismatch at tip 2, gain 0.05). The mismatch is still
-    scored (as regressed, not refined) and listed; against a rig model from a config, or a baseline fitted on another record
-    (``--fit-data``), the linear part can be wrong, and it can be a finding."""
+    scored (as regressed, not refined) and listed; against a rig model from a config, or a baseline
+    fitted on another record (``--fit-data``), the linear part can be wrong, and it can be a finding."""
     if not fitted_here:
         return scored
     return [c for c in scored if c.cause != "linear_mismatch"]
