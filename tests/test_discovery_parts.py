@@ -17,13 +17,15 @@ from daq.sim.independent.draws import equivalents
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import free_decay
 from ident.discovery.discover import _warm, noise_floor, sum_notes
-from ident.discovery.baselines.modal import ModalBaseline, drivable, fit_model, peak_poles, underlying_poles
+from ident.discovery.baselines.modal import (Columns, ModalBaseline, _design, drivable, fit_model, peak_poles,
+                                             underlying_poles)
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import (CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, equivalent_coefficient, force_series,
                                       law_parameters)
 from ident.discovery.baselines import Location
 from ident.discovery.result import Discovery
-from ident.discovery.model import Element, LinearModel, nudging_gain, simulate, substeps_for, without_feedthrough
+from ident.discovery.model import (Element, LinearModel, mode_states, nudging_gain, simulate, substeps_for,
+                                  without_feedthrough)
 from ident.discovery.search import (Candidate, Settings, choose, clustered_p, one_sign, paired_p, pieces_per_block,
                                     predict, signed_rank_p)
 from ident.discovery.signals import convert, first_family, frf, impulsive, miso_frf, prepare, within_budget
@@ -301,6 +303,36 @@ def test_modal_fit_recovers_a_chains_analytic_modes():
     true_z = np.sort(model.damping_ratios)
     assert np.allclose(np.sort(fitted.damping_ratios), true_z, rtol=1e-2)
     assert err < 1e-3
+
+
+def test_the_design_built_mode_by_mode_and_kept_between_calls_is_the_all_modes_design_bitwise():
+    # ``Columns`` computes each mode's columns alone and keeps them while a search moves one pole at a
+    # time; the matrices must be those of ``_design`` on every mode at once (states from rest under the
+    # excitation and an element force, free responses from the start and from a blow), to the last bit
+    model = _chain()
+    fs = 200.0
+    rng = np.random.default_rng(3)
+    F = rng.standard_normal(4000)
+    out = simulate(model, F, fs, [(0, 0), (1, 2)])
+    prep = replace(prepare(Measurement(fs, Channel("F", "force", F), (Channel("x1", "displacement", out[:, 0]),
+                                                                     Channel("x2", "acceleration", out[:, 1]))),
+                           (1.0, 60.0)), blows=(1500,))
+    g = rng.standard_normal(prep.n)
+    gain = rng.standard_normal(3) + 1j * rng.standard_normal(3)
+    rows = np.arange(prep.edge, prep.n - prep.edge, 3)
+
+    def all_at_once(poles, order):
+        states = mode_states(poles, prep.u.astype(complex), 1 / fs) - mode_states(poles, g.astype(complex), 1 / fs) * gain
+        drive = prep.u[:, None] - g[:, None] * gain[None, :]
+        return _design(poles, states[rows], drive[rows], rows / fs, order, (1500 / fs,))
+
+    cols = Columns(prep, rows, [(prep.u, [(g, gain)])], (1500 / fs,), keep=8)
+    poles = model.poles.copy()
+    for step in range(3):  # the second and third calls reuse the modes the last one did not move
+        for order in (0, 2):
+            assert np.array_equal(cols.matrix(poles, order), all_at_once(poles, order))
+        poles[step] *= 1 + 1e-5
+    assert len(cols.kept) == 5  # three modes, then two moved poles: every (mode, pole) seen, within ``keep``
 
 
 def test_one_response_keeps_a_chains_resolved_modes():

@@ -22,6 +22,8 @@ coefficient per unit modal mass at the location is theta_r (lz_r 2 i omega_r)^2 
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -56,27 +58,76 @@ def _starts(prep: Prepared) -> tuple[float, ...]:
     return tuple(b / prep.fs_hz for b in prep.blows)
 
 
-def _inputs(poles, prep: Prepared, elements: tuple[Element, ...], forces) -> tuple[np.ndarray, np.ndarray]:
-    """Modal states (n, m) and modal inputs (n, m) under the excitation and known element forces."""
-    dt = 1.0 / prep.fs_hz
-    drive = np.repeat(prep.u[:, None].astype(complex), poles.size, axis=1)
-    for el, g in zip(elements, forces):
-        drive = drive - g[:, None] * el.gain[None, :]
-    states = np.zeros((prep.n, poles.size), complex)
-    # states are linear in the drive: the excitation's part, then each force's through its gains
-    states += mode_states(poles, prep.u.astype(complex), dt)
-    for el, g in zip(elements, forces):
-        states -= mode_states(poles, g.astype(complex), dt) * el.gain[None, :]
-    return states, drive
+class Columns:
+    """The design matrices (``_design``) of one fit over fixed ``rows``, each mode's columns computed
+    alone and, with ``keep``, kept for the last ``keep`` poles seen. A finite-difference Jacobian moves
+    one pole's decay or frequency per evaluation, so every other mode's columns are those already made at
+    the point it is taken at: the pole refinements' least squares spent most of their time rebuilding
+    them (independent seed 5: ``_design`` and ``mode_states`` 47 of 150 s). The assembled matrices are
+    bitwise those of ``_design`` on all modes at once.
+
+    ``drives``: per block of columns, the modal input's signal (n,) and the element forces acting with it,
+    each (force (n,), modal gains (m,)); the first block holds the free responses too (of the record's
+    initial state and from each of ``starts`` on), the others only the forced response (the extra inputs
+    of ``fit_with_forces``)."""
+
+    def __init__(self, prep: Prepared, rows: np.ndarray, drives, starts=(), keep: int = 0):
+        self.rows, self.t, self.dt = rows, rows / prep.fs_hz, 1.0 / prep.fs_hz
+        self.orders = sorted({ORDER[k] for k in prep.kinds})
+        # each signal and force as given (a drive subtracts a real force times a complex gain) and complex
+        self.drives = [(np.asarray(x, complex), [(np.asarray(g), np.asarray(g, complex), np.asarray(gain))
+                                                 for g, gain in forces]) for x, forces in drives]
+        self.starts, self.keep = tuple(starts), keep
+        self.kept: OrderedDict = OrderedDict()
+
+    def _mode(self, r: int, lam: complex) -> dict[int, np.ndarray]:
+        """Mode r's columns (len(rows), blocks) per kinematic order, for its pole ``lam``."""
+        key = (r, lam)
+        if key in self.kept:
+            self.kept.move_to_end(key)
+            return self.kept[key]
+        one, rows = np.array([lam]), self.rows
+        pieces: dict[int, list] = {o: [] for o in self.orders}
+        for j, (x, forces) in enumerate(self.drives):
+            # the states are linear in the drive: the signal's part from rest, then each force's through its gain
+            states = np.zeros((rows.size, 1), complex)
+            states += mode_states(one, x, self.dt)[rows]
+            drive = x[rows, None]
+            for g, gc, gain in forces:
+                states -= mode_states(one, gc, self.dt)[rows] * gain[None, r:r + 1]
+                drive = drive - g[rows, None] * gain[None, r:r + 1]
+            for o in self.orders:
+                cols = _design(one, states, drive, self.t, o, self.starts if j == 0 else ())
+                pieces[o].append(cols if j == 0 else cols[:, :2])
+        out = {o: np.hstack(p) for o, p in pieces.items()}
+        if self.keep:
+            self.kept[key] = out
+            while len(self.kept) > self.keep:
+                self.kept.popitem(last=False)
+        return out
+
+    def matrix(self, poles: np.ndarray, order: int) -> np.ndarray:
+        """The design matrix (len(rows), blocks x m) of the responses of kinematic ``order``."""
+        each = [self._mode(r, complex(lam))[order] for r, lam in enumerate(poles)]
+        return np.stack(each, axis=2).reshape(self.rows.size, -1)
+
+
+def _residue_drives(prep: Prepared, elements: tuple[Element, ...], forces) -> list:
+    """``Columns``' drive of a modal model under the excitation and known element forces."""
+    return [(prep.u, [(g, el.gain) for el, g in zip(elements, forces)])]
 
 
 def fit_residues(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements: tuple[Element, ...] = (),
-                 forces=(), at: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 forces=(), at: np.ndarray | None = None,
+                 columns: Columns | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Residues C (k, m) for fixed poles by least squares on the measured responses over ``rows``, and the
     fitted outputs there (len(rows), k); with ``at``, the outputs at those rows instead, from the measured
     input alone (the forced response: the free response of the record's initial state fitted on ``rows``
-    is left out, see ``fit_model``). ``forces``: element forces along the record (measured coordinates)."""
-    states, drive = _inputs(poles, prep, elements, forces)
+    is left out, see ``fit_model``). ``forces``: element forces along the record (measured coordinates).
+    ``columns``: the design's columns over ``rows`` under these elements and forces, kept between calls."""
+    drives = _residue_drives(prep, elements, forces)
+    cols = columns or Columns(prep, rows, drives, _starts(prep))
+    at_cols = None if at is None else Columns(prep, at, drives)
     m = poles.size
     C = np.empty((len(prep.names), m), complex)
     fit = np.empty((rows.size if at is None else at.size, len(prep.names)))
@@ -84,8 +135,8 @@ def fit_residues(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements: 
     for i, kind in enumerate(prep.kinds):
         o = ORDER[kind]
         if o not in design:
-            X = _design(poles, states[rows], drive[rows], rows / prep.fs_hz, o, _starts(prep))
-            forced = None if at is None else _design(poles, states[at], drive[at], at / prep.fs_hz, o)[:, :2 * m]
+            X = cols.matrix(poles, o)
+            forced = None if at_cols is None else at_cols.matrix(poles, o)[:, :2 * m]
             design[o] = X, LeastSquares(X), forced
         X, ls, forced = design[o]
         y = prep.measured[rows, i] - (prep.base[rows, o] if prep.base_excited else 0.0)
@@ -152,6 +203,7 @@ def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(
         return poles
     full = np.concatenate([np.log(np.maximum(-poles.real, 1e-6)), np.log(poles.imag)])
     moves = np.concatenate([free, free])
+    columns = Columns(prep, sub, _residue_drives(prep, elements, forces), _starts(prep), keep=2 * poles.size + 2)
 
     def unpack(x):
         y = full.copy()
@@ -165,7 +217,7 @@ def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(
     def resid(x):
         if not admissible(unpack(x), prep):
             return np.full(sub.size * scale.size, 1e3)
-        _, fit = fit_residues(unpack(x), prep, sub, elements, forces)
+        _, fit = fit_residues(unpack(x), prep, sub, elements, forces, columns=columns)
         if not np.all(np.isfinite(fit)):
             return np.full(sub.size * scale.size, 1e3)
         return ((fit - prep.measured[sub]) / scale).ravel()
@@ -184,17 +236,12 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
     time domain, the nonlinear force as an extra input with residues of its own, so the linear part is
     not the equivalent linearisation of the nonlinear data (Noel & Kerschen, MSSP 2013). Returns the fit's
     NRMSE on ``rows`` too."""
-    dt = 1.0 / prep.fs_hz
     st = stride(prep, rows)
     hb = [convert(h, prep.fs_hz, prep.band, 0, 0) for h in forces]
     scale = np.maximum(prep.measured[rows].std(axis=0), 1e-300)
 
-    def solve(poles, sub):
-        m = poles.size
-        t = sub / prep.fs_hz
-        ins = [prep.u] + hb
-        states = [mode_states(poles, x.astype(complex), dt)[sub] for x in ins]
-        drives = [np.repeat(x[sub, None].astype(complex), m, axis=1) for x in ins]
+    def solve(poles, columns):
+        m, sub = poles.size, columns.rows
         C = np.empty((len(prep.names), m), complex)
         D = [np.empty((len(prep.names), m), complex) for _ in hb]
         fit = np.empty((sub.size, len(prep.names)))
@@ -203,9 +250,7 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
         for i, kind in enumerate(prep.kinds):
             o = ORDER[kind]
             if o not in design:
-                X = [_design(poles, states[0], drives[0], t, o, _starts(prep))]
-                X += [_design(poles, sq, dq, t, o)[:, :2 * m] for sq, dq in zip(states[1:], drives[1:])]
-                X = np.hstack(X)
+                X = columns.matrix(poles, o)
                 if not np.all(np.isfinite(X)):
                     raise ValueError("poles left the stable half-plane")
                 design[o] = X, LeastSquares(X)
@@ -224,12 +269,14 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
         return -np.exp(x[:m]) + 1j * np.exp(x[m:])
 
     sub = rows[::st]
+    drives = [(x, []) for x in [prep.u] + hb]
+    columns = Columns(prep, sub, drives, _starts(prep), keep=2 * poles0.size + 2)
 
     def resid(x):
         if not admissible(unpack(x), prep):
             return np.full(sub.size * scale.size, 1e3)
         try:
-            return ((solve(unpack(x), sub)[2] - prep.measured[sub]) / scale).ravel()
+            return ((solve(unpack(x), columns)[2] - prep.measured[sub]) / scale).ravel()
         except NUMERIC_FAILURES:
             return np.full(sub.size * scale.size, 1e3)
 
@@ -240,7 +287,7 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
         poles = np.asarray(poles0, complex)
     if not admissible(poles, prep):
         poles = np.asarray(poles0, complex)
-    C, D, fit = solve(poles, rows)
+    C, D, fit = solve(poles, Columns(prep, rows, drives, _starts(prep)))
     return poles, C, D, _nrmse(fit, prep.measured[rows])
 
 
