@@ -16,7 +16,7 @@ from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import free_decay
-from ident.discovery.discover import _warm, noise_floor, sum_notes
+from ident.discovery.discover import _softening_look_alike, _warm, noise_floor, sum_notes
 from ident.discovery.baselines.modal import (Columns, ModalBaseline, _design, drivable, fit_model, peak_poles,
                                              underlying_poles)
 from ident.discovery.baselines.rig import RigBaseline
@@ -441,6 +441,28 @@ def test_one_cause_at_another_place_is_a_look_alike_and_between_the_same_sensors
     d = Discovery(*[None] * 7, findings=[best], ambiguous=[alike], candidates=[], split=None, prep=None, warm=0)
     assert d.verdict() == ("ambiguous: contact at a1-a2 or contact at a1 (the same cause at two places: a response "
                            "on each side of the suspected element, or the excitation moved)")
+
+
+@pytest.mark.parametrize("k3,look_alike", [(-2.3e7, "hysteretic_joint at tip2+tip1"), (2.3e7, None)])
+def test_a_softening_cubic_has_the_joint_between_the_same_sensors_as_its_look_alike(k3, look_alike):
+    # independent seed 45's shape: a joint at tip 1 named a cubic there (k3 < 0: it softens) that beat the
+    # joint's fitted law on held-out blocks. Softening, the cubic gets the best joint between the same
+    # sensors (either sign convention) as a look-alike whatever the scores; one elsewhere, better still, is
+    # another place, not this mechanism. Hardening, nothing is added
+    rng = np.random.default_rng(5)
+    e = rng.uniform(0.18, 0.22, 40)
+    first = replace(_scored("cubic_stiffness", e * 0.86), location="tip1+tip2",
+                    parameters={"coefficient_per_mass": k3})
+    joints = [replace(_scored("hysteretic_joint", e * g), location=where)
+              for g, where in ((0.97, "tip1-tip2"), (0.95, "tip2+tip1"), (0.80, "tip1"))]
+    alike = _softening_look_alike(first, [], [first] + joints)
+    assert [c.label for c in alike] == ([look_alike] if look_alike else [])
+    if alike:
+        d = Discovery(*[None] * 7, findings=[first], ambiguous=[alike], candidates=[], split=None, prep=None, warm=0)
+        assert d.verdict() == ("ambiguous: cubic_stiffness at tip1+tip2 or hysteretic_joint at tip2+tip1 (a stepped "
+                               "sine at several levels: a joint's damping grows with amplitude as it slips, a "
+                               "cubic's does not)")
+        assert _softening_look_alike(first, alike, [first] + joints) == []  # already there: not twice
 
 
 def test_the_test_against_the_baseline_is_the_exact_signed_rank_test_and_holds_a_heavy_tail():

@@ -74,6 +74,10 @@ class Cause:
     # the parameters are read off the whole record (a sensor's full scale: its extreme), not fitted on the
     # training blocks, so every block may test the cause (``search.score``), not the held-out ones alone
     read_off_record: bool = False
+    # the cause whose mechanism this law describes when its coefficient is negative (it softens), and the
+    # test that tells the two apart: a finding that softens is reported with that cause as its look-alike
+    softening_mechanism: str = ""
+    separates_softening: str = ""
 
     @property
     def order(self) -> int:
@@ -92,7 +96,12 @@ CAUSES: dict[str, Cause] = {c.name: c for c in (
           starts=(1.0, 10.0, 100.0)),
     Cause("cubic_stiffness", CUBIC, (Parameter("coefficient_per_mass", "1/(m^2 s^2)", "k3 per modal mass"),),
           positive=False, backbone_power=2.0,
-          separates_by="a stepped sine at three or more levels: a cubic's frequency shift grows with amplitude^2"),
+          separates_by="a stepped sine at three or more levels: a cubic's frequency shift grows with amplitude^2",
+          # no structure's restoring force turns over: over the amplitudes a record holds, a softening cubic
+          # describes a mechanism that softens, and a joint that slips is the catalogue's
+          softening_mechanism="hysteretic_joint",
+          separates_softening="a stepped sine at several levels: a joint's damping grows with amplitude as it "
+                              "slips, a cubic's does not"),
     Cause("quadratic_stiffness", QUADRATIC, (Parameter("coefficient_per_mass", "1/(m s^2)", "k2 per modal mass"),),
           positive=False, backbone_power=1.0,
           separates_by="a stepped sine at three or more levels: the shift grows with amplitude, not its square"),

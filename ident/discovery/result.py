@@ -57,11 +57,28 @@ class Discovery:
         for f, alike in zip(self.findings, self.ambiguous):
             if alike:
                 names = " or ".join([f.label] + [a.label for a in alike[:2]])
-                how = (PLACE if all(a.cause == f.cause for a in alike) else CAUSES[f.cause].separates_by)
+                how = (PLACE if all(a.cause == f.cause for a in alike) else separating_test(f, alike))
                 parts.append(f"ambiguous: {names} ({how})")
             else:
                 parts.append(f"found {f.label} (held-out gain {f.gain:.2f}, p = {f.p_value:.1g})")
         return "; ".join(parts)
+
+
+def separating_test(first: Candidate, alike: list[Candidate]) -> str:
+    """The test that tells a finding from its look-alikes: its cause's, or, when it softens and a look-alike
+    is the mechanism it then describes (``Cause.softening_mechanism``), the one that tells those two apart."""
+    cause = CAUSES[first.cause]
+    if softens(first) and any(a.cause == cause.softening_mechanism for a in alike):
+        return cause.separates_softening
+    return cause.separates_by
+
+
+def softens(c: Candidate) -> bool:
+    """Does the candidate's law soften (its first coefficient negative where the cause names a mechanism
+    that softening describes)?"""
+    cause = CAUSES[c.cause]
+    value = c.parameters.get(cause.coefficients[0].name) if cause.softening_mechanism else None
+    return isinstance(value, float) and value < 0
 
 
 def equation(c: Candidate) -> str:
