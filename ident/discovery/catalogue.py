@@ -97,8 +97,8 @@ CAUSES: dict[str, Cause] = {c.name: c for c in (
     Cause("cubic_stiffness", CUBIC, (Parameter("coefficient_per_mass", "1/(m^2 s^2)", "k3 per modal mass"),),
           positive=False, backbone_power=2.0,
           separates_by="a stepped sine at three or more levels: a cubic's frequency shift grows with amplitude^2",
-          # no structure's restoring force turns over: over the amplitudes a record holds, a softening cubic
-          # describes a mechanism that softens, and a joint that slips is the catalogue's
+          # a softening cubic is also how a joint that slips looks over the amplitudes a record holds: where
+          # the joint fits significantly too, it is the finding's look-alike (``discover._softening_look_alike``)
           softening_mechanism="hysteretic_joint",
           separates_softening="a stepped sine at several levels: a joint's damping grows with amplitude as it "
                               "slips, a cubic's does not"),

@@ -28,7 +28,9 @@ class Discovery:
     extended_test_nrmse: float
     extended_block_errors: np.ndarray
     findings: list[Candidate]
-    ambiguous: list[list[Candidate]]  # per finding, the causes the data cannot separate from it
+    # per finding, the causes the data cannot separate from it (and, for a softening first finding, the
+    # mechanism it may be: ``discover._softening_look_alike``)
+    ambiguous: list[list[Candidate]]
     candidates: list[Candidate]  # every candidate scored, best gain first
     split: Split
     prep: Prepared

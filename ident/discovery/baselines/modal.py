@@ -125,17 +125,17 @@ def fit_residues(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements: 
     input alone (the forced response: the free response of the record's initial state fitted on ``rows``
     is left out, see ``fit_model``). ``forces``: element forces along the record (measured coordinates).
     ``columns``: the design's columns over ``rows`` under these elements and forces, kept between calls."""
-    drives = _residue_drives(prep, elements, forces)
-    cols = columns or Columns(prep, rows, drives, _starts(prep))
-    at_cols = None if at is None else Columns(prep, at, drives)
     m = poles.size
+    if columns is None:  # each mode built once for every kinematic order of this fit
+        columns = Columns(prep, rows, _residue_drives(prep, elements, forces), _starts(prep), keep=m)
+    at_cols = None if at is None else Columns(prep, at, _residue_drives(prep, elements, forces), keep=m)
     C = np.empty((len(prep.names), m), complex)
     fit = np.empty((rows.size if at is None else at.size, len(prep.names)))
     design: dict[int, tuple] = {}  # per kinematic order: the design matrix, its factorisation, the forced part at ``at``
     for i, kind in enumerate(prep.kinds):
         o = ORDER[kind]
         if o not in design:
-            X = cols.matrix(poles, o)
+            X = columns.matrix(poles, o)
             forced = None if at_cols is None else at_cols.matrix(poles, o)[:, :2 * m]
             design[o] = X, LeastSquares(X), forced
         X, ls, forced = design[o]
@@ -287,7 +287,7 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
         poles = np.asarray(poles0, complex)
     if not admissible(poles, prep):
         poles = np.asarray(poles0, complex)
-    C, D, fit = solve(poles, Columns(prep, rows, drives, _starts(prep)))
+    C, D, fit = solve(poles, Columns(prep, rows, drives, _starts(prep), keep=poles.size))
     return poles, C, D, _nrmse(fit, prep.measured[rows])
 
 
