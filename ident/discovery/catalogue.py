@@ -75,7 +75,8 @@ class Cause:
     # training blocks, so every block may test the cause (``search.score``), not the held-out ones alone
     read_off_record: bool = False
     # the cause whose mechanism this law describes when its coefficient is negative (it softens), and the
-    # test that tells the two apart: a finding that softens is reported with that cause as its look-alike
+    # test that tells the two apart: a first finding that softens has that cause as a look-alike where it
+    # fits significantly too
     softening_mechanism: str = ""
     separates_softening: str = ""
 
