@@ -126,9 +126,10 @@ def fit_residues(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements: 
     is left out, see ``fit_model``). ``forces``: element forces along the record (measured coordinates).
     ``columns``: the design's columns over ``rows`` under these elements and forces, kept between calls."""
     m = poles.size
+    drives = _residue_drives(prep, elements, forces)
     if columns is None:  # each mode built once for every kinematic order of this fit
-        columns = Columns(prep, rows, _residue_drives(prep, elements, forces), _starts(prep), keep=m)
-    at_cols = None if at is None else Columns(prep, at, _residue_drives(prep, elements, forces), keep=m)
+        columns = Columns(prep, rows, drives, _starts(prep), keep=m)
+    at_cols = None if at is None else Columns(prep, at, drives, keep=m)
     C = np.empty((len(prep.names), m), complex)
     fit = np.empty((rows.size if at is None else at.size, len(prep.names)))
     design: dict[int, tuple] = {}  # per kinematic order: the design matrix, its factorisation, the forced part at ``at``
