@@ -202,9 +202,12 @@ def test_a_friction_three_times_better_at_its_own_beam_is_named_there_not_ambigu
 
 
 def test_an_overdamped_pole_above_the_band_that_lets_the_free_runs_wander_is_dropped(monkeypatch):
-    # seed 53, a Coulomb friction at tip 2 (2 kHz): the fit in the modes' band (5.4-67 Hz) keeps a pole at
-    # 165 Hz with zeta 1, which cut the fit's error and the forced response's on the blocks left out, and
-    # made the held-out free runs err 0.41; the same fit without it errs 0.09 (both scored below)
+    # seed 53, a Coulomb friction at tip 2 (2 kHz): the fit in the modes' band (5.4-67 Hz) keeps a pole
+    # above it at zeta 1 (165 Hz on one host, 156 Hz on another: the fit follows round-off), which cuts the
+    # fit's error and makes the held-out free runs err 0.41; the same fit without it errs 0.09 (both scored
+    # below). A check on a refit of two thirds of the training blocks kept it on the second host (its
+    # refit's pole, at 1,030 Hz, did not wander); the fitted model's own free runs on its training blocks
+    # drop it on both
     c = independent_case(53)
     m = c.measurement
     with threadpool_limits(limits=1, user_api="blas"):  # as discover fits (its docstring says why)
@@ -217,7 +220,7 @@ def test_an_overdamped_pole_above_the_band_that_lets_the_free_runs_wander_is_dro
     p, q = base.model.poles, kept.model.poles
     assert np.all(-p.real / np.abs(p) < 0.3) and np.all(np.abs(p) / (2 * np.pi) < band[1])
     device = (-q.real / np.abs(q) > 0.5) & (np.abs(q) / (2 * np.pi) > band[1])
-    assert device.sum() == 1 and abs(abs(q[device][0]) / (2 * np.pi) - 165.2) < 1.0
+    assert device.sum() == 1 and band[1] < abs(q[device][0]) / (2 * np.pi) < m.fs_hz / 2
     scale = np.maximum(prep.measured[split.rows("test")].std(axis=0), 1e-300)
     bound = simulation_bound(prep)
     errors = [block_errors(b, b.model, prep, split.test, D._warm(b, prep), scale, (), bound)[1] for b in (base, kept)]
