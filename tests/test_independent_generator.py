@@ -321,7 +321,7 @@ def test_discovery_rig_case_truth():
 
 @pytest.mark.parametrize("family, cause, seed", [("rig_force", "friction_joint", 0), ("duffing", "cubic_stiffness", 2),
                                                  ("chain", "coulomb_friction", 1), ("cc_beam", "cubic_stiffness", 0),
-                                                 ("rig_voltage", "none", 0)])
+                                                 ("rig_voltage", "none", 0), ("duffing_softening", "cubic_stiffness", 0)])
 def test_discovery_families(family, cause, seed):
     case = discovery_case(seed, family, cause)
     truth = _check_case(case)
@@ -330,9 +330,12 @@ def test_discovery_families(family, cause, seed):
         assert truth["effect"] == {} and truth["effect_strength"] == 0.0 and truth["location"] is None
     else:
         assert 0.0 < truth["effect_strength"] < 2.0
-    if family == "duffing":
+    if family.startswith("duffing"):
         assert truth["equivalent"]["k3_n_per_m3"] == pytest.approx(truth["effect"]["k3_n_per_m3"])
         assert 20000 <= truth["n_samples"] <= 130000
+        soft = family == "duffing_softening"
+        assert (truth["effect"]["kind"], truth["effect"]["k3_n_per_m3"] < 0) == (
+            ("softening", True) if soft else ("hardening", False))
     if family == "chain":
         a, b = truth["location"].split("-")
         assert case.kinds[a] == case.kinds[b] == "acceleration" and truth["effect_vs_damping"] > 0

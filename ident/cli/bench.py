@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from daq.sim.independent.cases import FAMILY_CAUSES
 
 from ..derivatives import smooth
 from ..library import PolynomialForcingLibrary
@@ -56,6 +57,9 @@ def add_parser(sub) -> None:
                    help="discovery: daq.sim.independent (written apart from ident; default) or daq.sim.hidden "
                         "(this project's rig model with one effect)")
     p.add_argument("--seed", type=SEED, default=0, help="discovery: first seed; batch: the campaign's seed")
+    p.add_argument("--family", choices=sorted(FAMILY_CAUSES),
+                   help="discovery (independent generator): only this family's cases (duffing_softening, a "
+                        "Duffing oscillator with a softening cubic, is run only when asked for)")
     p.add_argument("--twins", action="store_true",
                    help="discovery (independent generator): also run each case without its effect: the findings "
                         "made where there is nothing, and each effect's share of the baseline's error")
@@ -111,16 +115,20 @@ def _pysindy_loop(x, xdot, t, f, lambdas, n_rows):
 def run(args) -> int:
     if args.save is not None and args.what != "discovery":
         raise ValueError("--save keeps the discovery benchmark's records; it is for ident bench discovery")
+    if args.family is not None and args.what != "discovery":
+        raise ValueError("--family picks the discovery benchmark's cases; it is for ident bench discovery")
     if args.data is not None and args.what != "f16":
         raise ValueError("--data is the F-16 records' folder; it is for ident bench f16")
     if args.what == "discovery":
         if args.duration is not None and args.generator != "rig":
             raise ValueError("--duration sets the rig generator's case length; the independent generator's cases "
                              "have their own")
+        if args.family is not None and args.generator != "independent":
+            raise ValueError("--family picks the independent generator's family; daq.sim.hidden has one rig")
         if args.twins and args.generator != "independent":
             raise ValueError("--twins needs the independent generator: daq.sim.hidden has no twins")
         return run_discovery(args.generator, args.cases, args.seed, args.workers, args.scheduler,
-                             args.duration or RIG_CASE_S, args.twins, args.save)
+                             args.duration or RIG_CASE_S, args.twins, args.save, args.family)
     if args.what != "memory" and (args.fs_hz is not None or args.max_samples is not None):
         raise ValueError("--fs and --max-samples are for ident bench memory")
     if args.what == "f16":

@@ -137,11 +137,12 @@ def judge(case: Case, d, seconds: float) -> Verdict:
                     for f in d.findings], float(d.baseline_test_nrmse), strength=case.strength)
 
 
-def run_case(args: tuple[str, int, float, bool, bool]) -> Verdict:
-    """One case (a Dask task): (generator, seed, the rig generator's case length in s, twin, keep); with
-    ``keep`` the verdict carries the case's record for ``--save`` (``saved_record``)."""
-    generator, seed, duration_s, twin, keep = args
-    case = rig_case(seed, duration_s) if generator == "rig" else independent_case(seed, twin=twin)
+def run_case(args: tuple[str, int, float, bool, bool, str | None]) -> Verdict:
+    """One case (a Dask task): (generator, seed, the rig generator's case length in s, twin, keep, the
+    independent generator's family or None for its draw); with ``keep`` the verdict carries the case's
+    record for ``--save`` (``saved_record``)."""
+    generator, seed, duration_s, twin, keep, family = args
+    case = rig_case(seed, duration_s) if generator == "rig" else independent_case(seed, twin=twin, family=family)
     t0 = time.perf_counter()
     try:
         d = discover(case.measurement, rig=case.rig)
@@ -183,10 +184,11 @@ def _joint_truth(eq: dict, effect: dict) -> dict:
     return truth
 
 
-def independent_case(seed: int, generated=None, twin: bool = False) -> Case:
+def independent_case(seed: int, generated=None, twin: bool = False, family: str | None = None) -> Case:
     """The generator's case ``seed`` as a measurement and its truth (``generated``: that case, if already
-    drawn; ``twin``: the case run without its effect, cause "none")."""
-    c = generated or discovery_case(seed, twin=twin)
+    drawn; ``twin``: the case run without its effect, cause "none"; ``family``: that family's case, else
+    the family drawn)."""
+    c = generated or discovery_case(seed, family, twin=twin)
     t = c.truth
     col, kind = t["excitation"].split(":")
     responses = tuple(Channel(n, k, np.asarray(c.columns[n], float)) for n, k in (r.split(":") for r in t["responses"]))
@@ -358,14 +360,16 @@ def environment() -> str:
 
 def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: int | None = None,
                   scheduler: str | None = None, duration_s: float = RIG_CASE_S, twins: bool = False,
-                  save: Path | None = None) -> int:
+                  save: Path | None = None, family: str | None = None) -> int:
     """The benchmark: in this process, or on a local Dask cluster of ``workers`` processes, or on the
     cluster at ``scheduler``; the lines in seed order either way. ``twins``: each independent case is
     also run without its effect (``twin_report``). ``save``: a JSON-lines file, one ``saved_record`` per
     case (and twin) in the printed order, streamed as ``NAME.part`` and renamed when the run completes (a
-    run cut short leaves the part, whole lines up to its last case); an existing file is never replaced."""
+    run cut short leaves the part, whole lines up to its last case); an existing file is never replaced.
+    ``family``: the independent generator's cases of that family only (``FAMILY_CAUSES``: one not drawn by
+    default, such as ``duffing_softening``, included)."""
     t0 = time.perf_counter()
-    jobs = [(generator, s, duration_s, twin, save is not None) for s in range(first_seed, first_seed + n_cases)
+    jobs = [(generator, s, duration_s, twin, save is not None, family) for s in range(first_seed, first_seed + n_cases)
             for twin in ((False, True) if twins else (False,))]
     verdicts = []
     out = _saving(save) if save is not None else None
