@@ -409,12 +409,12 @@ def _saving(save: Path) -> PartFile:
 
 def _print(v: Verdict) -> None:
     if v.twin:
-        print(f"twin {v.seed:4d} {v.family:12s} {'(' + v.cause + ')':18s} -> {v.named:18s} {v.location:10s}"
+        print(f"twin {v.seed:4d} {v.family:17s} {'(' + v.cause + ')':18s} -> {v.named:18s} {v.location:10s}"
               f"  [{v.seconds:.0f} s] {'; '.join(v.detail)}  ({v.info})", flush=True)
         return
     mark = "" if v.right else "  WRONG"
     floor = (f", baseline {v.baseline_nrmse:.3g} = {v.baseline_nrmse / v.noise_floor:.1f} x the noise floor"
              if v.noise_floor and v.baseline_nrmse is not None else "")
-    print(f"case {v.seed:4d} {v.family:12s} {v.cause:18s} -> {v.named:18s} {v.location:10s}"
+    print(f"case {v.seed:4d} {v.family:17s} {v.cause:18s} -> {v.named:18s} {v.location:10s}"
           f"{'' if v.extra == 0 else f' +{v.extra} extra'}{mark}  [{v.seconds:.0f} s] {'; '.join(v.detail)}"
           f"  ({v.info}{floor})", flush=True)

@@ -131,11 +131,16 @@ def _without_devices(fitted: ModalBaseline, prep: Prepared, split: Split) -> Mod
     fitted model that is checked, on the blocks it was fitted to: an earlier check fitted both models
     again on two thirds of those blocks and ran the third, and the refit's device pole landed elsewhere
     and did not wander (seed 53 on a second host: 1,030 Hz, 0.09 against 0.11; the pole kept, held out at
-    0.41). On independent seeds 0-99, six baselines have such a pole; on each the training blocks' free
-    runs and the held-out blocks' agree on which model is better (seeds 13, 45, 53, 89: 3-9 x, kept by
-    the refit's check; 38: 0.30 against 0.48; 77: a tie). A pole the free runs need stays (the overdamped
-    poles below the band, the drift of integrated accelerations they fit, are not touched: removing them
-    made seeds 44, 58 and 67 worse)."""
+    0.41). On independent seeds 0-99 (stop 55's host), six baselines have such a pole; on each the
+    training blocks' free runs and the held-out blocks' agree on which model is better (seeds 13, 45, 53,
+    89: 3-9 x, kept by the refit's check; 38: 0.30 against 0.48; 77: a tie). A pole the free runs need
+    stays (the overdamped poles below the band, the drift of integrated accelerations they fit, are not
+    touched: removing them made seeds 44, 58 and 67 worse).
+
+    Only training blocks are scored; the warm-up before each reads the measured state before it, which
+    can lie in a held-out block (as the held-out blocks' warm-ups read training data). With one given
+    training slice (``--train``) the check is that slice's free run; the refit's check had needed three
+    blocks and was skipped there."""
     p = fitted.model.poles
     device = (-p.real / np.abs(p) > 0.5) & (np.abs(p) / (2 * np.pi) > prep.band[1])
     if not device.any() or device.all():
