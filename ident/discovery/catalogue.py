@@ -99,7 +99,8 @@ CAUSES: dict[str, Cause] = {c.name: c for c in (
           positive=False, backbone_power=2.0,
           separates_by="a stepped sine at three or more levels: a cubic's frequency shift grows with amplitude^2",
           # a softening cubic is also how a joint that slips looks over the amplitudes a record holds: where
-          # the joint fits significantly too, it is the finding's look-alike (``discover._softening_look_alike``)
+          # the joint fits significantly and nearly as well too, it is the finding's look-alike
+          # (``discover._softening_look_alike``)
           softening_mechanism="hysteretic_joint",
           separates_softening="a stepped sine at several levels: a joint's damping grows with amplitude as it "
                               "slips, a cubic's does not"),
