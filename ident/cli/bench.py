@@ -58,8 +58,8 @@ def add_parser(sub) -> None:
                         "(this project's rig model with one effect)")
     p.add_argument("--seed", type=SEED, default=0, help="discovery: first seed; batch: the campaign's seed")
     p.add_argument("--family", choices=sorted(FAMILY_CAUSES),
-                   help="discovery (independent generator): only this family's cases (duffing_softening, a "
-                        "Duffing oscillator with a softening cubic, is run only when asked for)")
+                   help="discovery (independent generator): this family on every seed instead of the family drawn "
+                        "(duffing_softening, a Duffing oscillator with a softening cubic, is run only when asked for)")
     p.add_argument("--twins", action="store_true",
                    help="discovery (independent generator): also run each case without its effect: the findings "
                         "made where there is nothing, and each effect's share of the baseline's error")

@@ -366,8 +366,8 @@ def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: in
     also run without its effect (``twin_report``). ``save``: a JSON-lines file, one ``saved_record`` per
     case (and twin) in the printed order, streamed as ``NAME.part`` and renamed when the run completes (a
     run cut short leaves the part, whole lines up to its last case); an existing file is never replaced.
-    ``family``: the independent generator's cases of that family only (``FAMILY_CAUSES``: one not drawn by
-    default, such as ``duffing_softening``, included)."""
+    ``family``: the independent generator's family on every seed instead of the family drawn
+    (``FAMILY_CAUSES``: one not drawn by default, such as ``duffing_softening``, included)."""
     t0 = time.perf_counter()
     jobs = [(generator, s, duration_s, twin, save is not None, family) for s in range(first_seed, first_seed + n_cases)
             for twin in ((False, True) if twins else (False,))]

@@ -76,7 +76,7 @@ class Cause:
     read_off_record: bool = False
     # the cause whose mechanism this law describes when its coefficient is negative (it softens), and the
     # test that tells the two apart: a first finding that softens has that cause as a look-alike where it
-    # fits significantly too
+    # fits significantly and nearly as well too (``discover.SOFTENING_SHARE``)
     softening_mechanism: str = ""
     separates_softening: str = ""
 
