@@ -129,7 +129,7 @@ def test_a_linear_algebra_failure_in_the_search_is_a_failed_candidate_not_a_cras
     def failing(*args, **kwargs):
         raise np.linalg.LinAlgError("SVD did not converge")
 
-    monkeypatch.setattr(importlib.import_module("ident.discovery.discover"), "regress", failing)
+    monkeypatch.setattr(importlib.import_module("ident.discovery.discover"), "regressions", failing)
     c = independent_case(15)  # a Duffing oscillator with nothing hidden
     d = discover(c.measurement)
     assert not d.findings

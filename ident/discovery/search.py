@@ -7,7 +7,12 @@ blocks, and select honestly.
    on the linear responses to each cause's force shape evaluated on the measured coordinate of each
    location (Kaheman et al. 2019 learn such discrepancies in physical coordinates; Noel & Kerschen's
    nonlinear subspace method treats the nonlinear force as an extra input the same way). A shape with
-   nonlinear parameters (a gap, a side, a slip displacement) is searched on a grid.
+   nonlinear parameters (a gap, a side, a slip displacement) is searched on a grid. Against a baseline
+   fitted to the record each cause is also regressed with a spring and a damper at its coordinate
+   (``regressions(compensate=True)``): the baseline holds the cause's equivalent stiffness and damping, the
+   plain regression sees only what departs from them (a drag comes out a fiftieth of its size), and the
+   spring and damper take that part out again. Those candidates are scored only where the rest found
+   nothing (``discover``).
 3. Refinement. The regression is biased (displacement integrated from noisy accelerations, a linear part
    that absorbed some of the effect), so each cause's best location is refined by simulation error on
    training blocks (``refine``): coefficients scaled, a gap scanned and polished, and a fitted baseline
@@ -82,7 +87,8 @@ class Candidate:
 
     @property
     def order(self) -> int:
-        return CAUSES[self.cause].order
+        """Fitted numbers, for the parsimony rule: the cause's, and a compensation's spring and damper."""
+        return CAUSES[self.cause].order + len(compensation(self))
 
     @property
     def label(self) -> str:
@@ -249,9 +255,11 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
                        p_value=1.0, note=f"failed: {exc}")
     gain = 1.0 - nrmse / sc.test_nrmse if np.isfinite(nrmse) and sc.test_nrmse > 0 else -np.inf
     own_gain = float("nan")
-    if c.baseline is not None and c.elements and np.isfinite(nrmse):
+    comp = compensation(c)
+    if (c.baseline is not None or comp) and c.elements and np.isfinite(nrmse):
         try:
-            _, alone = block_errors(own, own.model, prep, split.test, sc.warm, sc.scale, (), sc.bound, sc.piece)
+            _, alone = block_errors(own, own.model.with_elements(comp), prep, split.test, sc.warm, sc.scale, (),
+                                    sc.bound, sc.piece)
         except NUMERIC_FAILURES:
             alone = np.inf
         own_gain = 1.0 - nrmse / alone if np.isfinite(alone) and alone > 0 else 1.0
@@ -305,22 +313,40 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
     baseline fitted to the data (``fit_jointly``) is then fitted again together with the force of each
     of the ``joint_shapes`` best shapes (its linear part had absorbed part of the effect), and the shape
     whose joint fit is best wins; the candidate carries that linear part as its own baseline."""
+    return regressions(baseline, prep, rows, residual, loc, cause_name, scale, joint_shapes)[0]
+
+
+def regressions(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.ndarray, loc: Location,
+                cause_name: str, scale: np.ndarray, joint_shapes: int = 0,
+                compensate: bool = False) -> tuple[Candidate | None, Candidate | None]:
+    """``regress``'s candidate and, with ``compensate``, the cause regressed together with a spring and a
+    damper at the same coordinate (``compensated``), from the same force responses (their simulation is
+    the regression's cost)."""
     cause = CAUSES[cause_name]
     model = baseline.model
     z, v = loc.coordinate(prep)
     gains = baseline.gain_basis(loc)
     if not gains:
-        return None
+        return None, None
     target = (residual[rows] / scale).ravel()
     tt = float(target @ target)
     if tt <= 0:
-        return None
+        return None, None
     lz = baseline.coordinate_modes(loc)
     signs = baseline.basis_signs(loc, gains)
-    found = []
+    found, with_lin = [], []
+    lin = None
+    if compensate:  # the responses to a unit spring and a unit damper at the coordinate
+        lin = np.concatenate([force_responses(model, prep, col, gains)[rows] / scale[None, :, None] for col in (z, v)],
+                             axis=2).reshape(rows.size * scale.size, -1)
     for shp, cols in shapes(cause, z, v):
         X = np.concatenate([force_responses(model, prep, cols[:, c], gains)[rows] / scale[None, :, None]
                             for c in range(cols.shape[1])], axis=2).reshape(rows.size * scale.size, -1)
+        if lin is not None:
+            got = _compensated_fit(baseline, loc, cause, shp, cols.shape[1], np.hstack([X, lin]), target, tt, gains,
+                                   lz)
+            if got is not None:
+                with_lin.append(got)
         try:
             theta = lstsq(X, target)
             if signs is not None and cols.shape[1] == 1:
@@ -339,14 +365,21 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
         if cause.positive and not all(pm > 0 for pm in per_mass):
             continue
         found.append((r2, shp, cols, tuple(elements), per_mass))
+    comp = None
+    if with_lin:
+        r2, shp, elements, per_mass = max(with_lin, key=lambda f: f[0])
+        n = len(cause.coefficients)
+        params = _parameters(cause_name, shp, per_mass[:n]) | dict(zip(COMPENSATION, per_mass[n:]))
+        comp = Candidate(cause_name, loc.name, params, elements,
+                         physical=_physical(baseline, loc, cause_name, shp, elements[:n]), fit_r2=r2)
     if not found:
-        return None
+        return None, comp
     found.sort(key=lambda f: -f[0])
     r2, shp, cols, elements, per_mass = found[0]
     best = Candidate(cause_name, loc.name, _parameters(cause_name, shp, per_mass), elements,
                      physical=_physical(baseline, loc, cause_name, shp, elements), fit_r2=r2)
     if not joint_shapes or not hasattr(baseline, "fit_jointly"):
-        return best
+        return best, comp
     best_err = None
     for r2, shp, cols, _, _ in found[:joint_shapes]:
         try:
@@ -363,7 +396,42 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
             best_err = err
             best = Candidate(cause_name, loc.name, _parameters(cause_name, shp, pm), els,
                              physical=_physical(own, loc, cause_name, shp, els), fit_r2=r2, baseline=own)
-    return best
+    return best, comp
+
+
+# the spring and the damper a compensated candidate adds at its coordinate, per unit modal mass
+COMPENSATION = ("compensation_stiffness_per_mass", "compensation_damping_per_mass")
+
+
+def _compensated_fit(baseline: Baseline, loc: Location, cause, shp: dict, n_cols: int, X: np.ndarray,
+                     target: np.ndarray, tt: float, gains: list[np.ndarray], lz: np.ndarray):
+    """One shape of a compensated regression: (share explained, shape, elements, per-mass coefficients),
+    the cause's elements first, then the spring and the damper; None where it fails or a physical cause
+    comes out with the wrong sign."""
+    try:
+        theta = lstsq(X, target)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.any(theta[:n_cols * len(gains)]):
+        return None
+    lin = CAUSES["linear_mismatch"]
+    ng = len(gains)
+    elements = []
+    for c in range(n_cols + 2):
+        gain = sum(t_ * g for t_, g in zip(theta[c * ng:(c + 1) * ng], gains))
+        p = law_parameters(cause, shp, c) if c < n_cols else law_parameters(lin, {}, c - n_cols)
+        elements.append(Element(cause.code if c < n_cols else lin.code, p, lz, gain, loc.weights))
+    per_mass = [baseline.per_mass(loc, el.gain) for el in elements]
+    if cause.positive and not all(pm > 0 for pm in per_mass[:n_cols]):
+        return None
+    return 1.0 - float(np.sum((target - X @ theta) ** 2)) / tt, shp, tuple(elements), per_mass
+
+
+def compensation(c: Candidate) -> tuple[Element, ...]:
+    """The spring and the damper of a compensated candidate (none for others)."""
+    if c.cause == "linear_mismatch" or COMPENSATION[0] not in c.parameters:
+        return ()
+    return c.elements[-2:]
 
 
 def one_sign(X: np.ndarray, y: np.ndarray, theta: np.ndarray, signs: np.ndarray, positive: bool) -> np.ndarray:
