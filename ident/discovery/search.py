@@ -57,7 +57,7 @@ class Settings:
     # generator's 40 cases 36 against 35; no effect-free record (18 "none" cases, 100 twins, the rig's 4)
     # gets a finding more. The gain floor and the tests between causes keep the twins clean, not alpha.
     alpha: float = 0.1
-    gain_floor: float = 0.03  # a finding must cut the held-out error by at least this share
+    gain_floor: float = 0.03  # a finding must cut the held-out error by at least this share (>= 0: ``score``)
     refine_evals: int = 60  # simulations per refinement
     refine_blocks: int = 6  # training blocks a refinement simulates (the busiest at the location)
     max_locations: int = 6  # locations searched in full (ranked by how much of the residual they explain)
@@ -254,9 +254,12 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
         return replace(c, block_errors=np.full(sc.block_errors.size, np.inf), test_nrmse=np.inf, gain=-np.inf,
                        p_value=1.0, note=f"failed: {exc}")
     gain = 1.0 - nrmse / sc.test_nrmse if np.isfinite(nrmse) and sc.test_nrmse > 0 else -np.inf
+    # computed only for a candidate that gains at all: one that does not beat the baseline is no finding
+    # whatever its own gain (``significant``: gain above a floor >= 0), and the check costs a second
+    # simulation of every held-out block
     own_gain = float("nan")
     comp = compensation(c)
-    if (c.baseline is not None or comp) and c.elements and np.isfinite(nrmse):
+    if (c.baseline is not None or comp) and c.elements and gain > 0:
         try:
             _, alone = block_errors(own, own.model.with_elements(comp), prep, split.test, sc.warm, sc.scale, (),
                                     sc.bound, sc.piece)
