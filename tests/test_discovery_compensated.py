@@ -18,6 +18,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from oscillator import rk4
+
 from ident.discovery import Channel, Measurement
 from ident.discovery.signals import prepare
 
@@ -30,21 +32,7 @@ W, ZETA = 2 * np.pi * 12.0, 0.01
 
 def _integrate(u: np.ndarray, c2: float) -> tuple[np.ndarray, np.ndarray]:
     """x and v of x'' + 2 zeta w x' + w^2 x + c2 v|v| = u from rest (RK4, force linearly interpolated)."""
-    h, x, v = 1 / FS, 0.0, 0.0
-    xs, vs = np.empty(u.size), np.empty(u.size)
-    acc = lambda x, v, f: f - 2 * ZETA * W * v - W * W * x - c2 * v * abs(v)  # noqa: E731
-    f = u.tolist() + [float(u[-1])]
-    for i in range(u.size):
-        fa, fb = f[i], f[i + 1]
-        fm = 0.5 * (fa + fb)
-        k1x, k1v = v, acc(x, v, fa)
-        k2x, k2v = v + 0.5 * h * k1v, acc(x + 0.5 * h * k1x, v + 0.5 * h * k1v, fm)
-        k3x, k3v = v + 0.5 * h * k2v, acc(x + 0.5 * h * k2x, v + 0.5 * h * k2v, fm)
-        k4x, k4v = v + h * k3v, acc(x + h * k3x, v + h * k3v, fb)
-        x += h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
-        v += h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
-        xs[i], vs[i] = x, v
-    return xs, vs
+    return rk4(u, FS, lambda x, v, f: f - 2 * ZETA * W * v - W * W * x - c2 * v * abs(v))
 
 
 @pytest.fixture(scope="module")

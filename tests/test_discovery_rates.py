@@ -16,6 +16,7 @@ import pytest
 from scipy import signal
 
 from clitools import run_main
+from oscillator import rk4
 from ident.cli.bench_f16 import SEGMENT, h1_peak
 from ident.cli.bench_memory import record
 from ident.cli.main import main as ident_main
@@ -42,21 +43,7 @@ def _force(fs: float, seconds: float, seed: int):
 
 def _integrate(u: np.ndarray, fs: float, k3: float) -> np.ndarray:
     """x of x'' + 2 zeta w x' + w^2 x + k3 x^3 = u from rest, RK4 on the force's linear interpolation."""
-    h, x, v = 1 / fs, 0.0, 0.0
-    out = np.empty(u.size)
-    acc = lambda x, v, f: f - 2 * ZETA * W * v - W * W * x - k3 * x * x * x  # noqa: E731
-    f = u.tolist() + [float(u[-1])]
-    for i in range(u.size):
-        fa, fb = f[i], f[i + 1]
-        fm = 0.5 * (fa + fb)
-        k1x, k1v = v, acc(x, v, fa)
-        k2x, k2v = v + 0.5 * h * k1v, acc(x + 0.5 * h * k1x, v + 0.5 * h * k1v, fm)
-        k3x, k3v = v + 0.5 * h * k2v, acc(x + 0.5 * h * k2x, v + 0.5 * h * k2v, fm)
-        k4x, k4v = v + h * k3v, acc(x + h * k3x, v + h * k3v, fb)
-        x += h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
-        v += h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
-        out[i] = x
-    return out
+    return rk4(u, fs, lambda x, v, f: f - 2 * ZETA * W * v - W * W * x - k3 * x * x * x)[0]
 
 
 def _duffing(seconds: float = 10.0) -> tuple[np.ndarray, np.ndarray, float]:

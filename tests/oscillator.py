@@ -1,0 +1,23 @@
+"""One-mode oscillators integrated apart from ``ident`` (RK4 in plain Python), so that the data the tests
+judge discovery on are not the method's own."""
+
+import numpy as np
+
+
+def rk4(u: np.ndarray, fs: float, acc) -> tuple[np.ndarray, np.ndarray]:
+    """x and v of x'' = acc(x, x', f) from rest under the force series u (linearly interpolated between
+    samples), one RK4 step per sample."""
+    h, x, v = 1 / fs, 0.0, 0.0
+    xs, vs = np.empty(u.size), np.empty(u.size)
+    f = u.tolist() + [float(u[-1])]
+    for i in range(u.size):
+        fa, fb = f[i], f[i + 1]
+        fm = 0.5 * (fa + fb)
+        k1x, k1v = v, acc(x, v, fa)
+        k2x, k2v = v + 0.5 * h * k1v, acc(x + 0.5 * h * k1x, v + 0.5 * h * k1v, fm)
+        k3x, k3v = v + 0.5 * h * k2v, acc(x + 0.5 * h * k2x, v + 0.5 * h * k2v, fm)
+        k4x, k4v = v + h * k3v, acc(x + h * k3x, v + h * k3v, fb)
+        x += h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
+        v += h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        xs[i], vs[i] = x, v
+    return xs, vs
