@@ -334,7 +334,8 @@ def force_response(model: LinearModel, h: np.ndarray, gains: list[np.ndarray], o
     sr, si = np.ascontiguousarray(st.real), np.ascontiguousarray(st.imag)
     lam = model.poles
     coef = np.array([[model.C[i] * lam ** int(kd) * -g for g in gains] for i, kd in outputs])  # (k, gains, m)
-    out = 2 * (np.einsum("nm,kgm->nkg", sr, coef.real) - np.einsum("nm,kgm->nkg", si, coef.imag))
+    flat = coef.reshape(-1, lam.size).T  # (m, k gains): one matrix product (einsum was 5 x slower here)
+    out = (2 * (sr @ flat.real - si @ flat.imag)).reshape(h.size, len(outputs), len(gains))
     for o, (i, kd) in enumerate(outputs):
         if kd >= 1:
             for j, g in enumerate(gains):
