@@ -1,4 +1,5 @@
-"""A cause regressed with its equivalent linearisation taken out (``search.regressions(compensate=True)``).
+"""A cause regressed with its equivalent linearisation taken out (``search.regressions`` given
+``search.spring_damper_responses``).
 
 A modal baseline fitted to a record holds each nonlinearity's equivalent stiffness and damping at the
 record's amplitudes; regressed on that baseline's residual alone, a drag comes out too small, since the part
@@ -56,7 +57,8 @@ def drag():
     rows = rows[np.all(np.isfinite(residual[rows]), axis=1)]
     scale = np.maximum(prep.measured[split.rows("test")].std(axis=0), 1e-300)
     loc = next(loc for loc in base.locations(prep) if loc.name == "x")
-    plain, comp = search.regressions(base, prep, rows, residual, loc, "quadratic_damping", scale, compensate=True)
+    lin = search.spring_damper_responses(base, prep, rows, loc, scale)
+    plain, comp = search.regressions(base, prep, rows, residual, loc, "quadratic_damping", scale, compensate=lin)
     return c2, float(v.std()), plain, comp
 
 

@@ -32,7 +32,7 @@ from .result import Discovery, softens
 from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, block_errors, busiest,
                      choose, clipped_ranges, clipping_candidates, clustered_p, gain_candidates, offset_findings,
                      paired_p, pieces_per_block, predict, refine, regress, regressions, same_sensors, score, significant,
-                     simulation_bound, train_error)
+                     simulation_bound, spring_damper_responses, train_error)
 from .signals import (ORDER, Channel, Measurement, Prepared, convert, first_family, modal_band, prepare,
                       within_budget)
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
@@ -353,12 +353,17 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     cands: list[Candidate] = []
     compensated: list[Candidate] = []
     for loc in ranked:
+        try:
+            lin = spring_damper_responses(baseline, prep, train_rows, loc, scale) if joint else None
+        except NUMERIC_FAILURES as exc:
+            notes.append(f"the spring and damper at {loc.name}: regression failed ({exc})")
+            lin = None
         for cause in baseline.causes:
             if cause in ("clipping", "sensor_gain", "sensor_offset"):
                 continue
             try:
                 c, cc = regressions(baseline, prep, train_rows, residual, loc, cause, scale,
-                                    compensate=joint and cause != "linear_mismatch")
+                                    compensate=lin if cause != "linear_mismatch" else None)
             except NUMERIC_FAILURES as exc:
                 notes.append(f"{cause} at {loc.name}: regression failed ({exc})")
                 continue

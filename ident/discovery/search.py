@@ -9,7 +9,7 @@ blocks, and select honestly.
    nonlinear subspace method treats the nonlinear force as an extra input the same way). A shape with
    nonlinear parameters (a gap, a side, a slip displacement) is searched on a grid. Against a baseline
    fitted to the record each cause is also regressed with a spring and a damper at its coordinate
-   (``regressions(compensate=True)``): the baseline holds the cause's equivalent stiffness and damping, the
+   (``regressions`` with ``spring_damper_responses``): the baseline holds the cause's equivalent stiffness and damping, the
    plain regression sees only what departs from them (a drag comes out a fiftieth of its size), and the
    spring and damper take that part out again. Those candidates are scored only where the rest found
    nothing (``discover``).
@@ -319,12 +319,24 @@ def regress(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.n
     return regressions(baseline, prep, rows, residual, loc, cause_name, scale, joint_shapes)[0]
 
 
+def spring_damper_responses(baseline: Baseline, prep: Prepared, rows: np.ndarray, loc: Location,
+                            scale: np.ndarray) -> np.ndarray | None:
+    """The regression's columns (len(rows) k, 2 gains) of a unit spring and a unit damper at the location's
+    coordinate: the same for every cause there, so made once per location (``regressions``' ``compensate``)."""
+    gains = baseline.gain_basis(loc)
+    if not gains:
+        return None
+    z, v = loc.coordinate(prep)
+    return np.concatenate([force_responses(baseline.model, prep, col, gains)[rows] / scale[None, :, None]
+                           for col in (z, v)], axis=2).reshape(rows.size * scale.size, -1)
+
+
 def regressions(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.ndarray, loc: Location,
                 cause_name: str, scale: np.ndarray, joint_shapes: int = 0,
-                compensate: bool = False) -> tuple[Candidate | None, Candidate | None]:
-    """``regress``'s candidate and, with ``compensate``, the cause regressed together with a spring and a
-    damper at the same coordinate (``compensated``), from the same force responses (their simulation is
-    the regression's cost)."""
+                compensate: np.ndarray | None = None) -> tuple[Candidate | None, Candidate | None]:
+    """``regress``'s candidate and, given ``compensate`` (``spring_damper_responses`` at the same location,
+    rows and scale), the cause regressed together with a spring and a damper at its coordinate
+    (``compensated``), from the same force responses (their simulation is the regression's cost)."""
     cause = CAUSES[cause_name]
     model = baseline.model
     z, v = loc.coordinate(prep)
@@ -338,10 +350,7 @@ def regressions(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: 
     lz = baseline.coordinate_modes(loc)
     signs = baseline.basis_signs(loc, gains)
     found, with_lin = [], []
-    lin = None
-    if compensate:  # the responses to a unit spring and a unit damper at the coordinate
-        lin = np.concatenate([force_responses(model, prep, col, gains)[rows] / scale[None, :, None] for col in (z, v)],
-                             axis=2).reshape(rows.size * scale.size, -1)
+    lin = compensate
     for shp, cols in shapes(cause, z, v):
         X = np.concatenate([force_responses(model, prep, cols[:, c], gains)[rows] / scale[None, :, None]
                             for c in range(cols.shape[1])], axis=2).reshape(rows.size * scale.size, -1)
