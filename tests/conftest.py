@@ -22,8 +22,11 @@ def pytest_configure(config):
 # (pyproject) hands whole files to the two workers in collection order, so these start at once and the
 # short files fill in at the end; xdist's default order (files with the most tests first) started the
 # three discovery files of nine tests each in the middle of the run. Files not listed keep their order.
-LONGEST_FIRST = ("test_discovery_independent_seeds.py", "test_discovery_independent.py", "test_discovery_rates.py",
-                 "test_replay.py", "test_discovery.py", "test_discovery_parts.py", "test_bounded_inputs.py",
+# The second file is not a discovery file: on a fresh clone numba's cache is empty, and two workers that
+# start on discovery both compile its kernels at once; starting on the live pipeline's kernels (``replay``),
+# each compiles one set and later loads the other's from the cache.
+LONGEST_FIRST = ("test_discovery_independent_seeds.py", "test_replay.py", "test_discovery_independent.py",
+                 "test_discovery_rates.py", "test_discovery.py", "test_discovery_parts.py", "test_bounded_inputs.py",
                  "test_cli.py", "test_record.py", "test_regimes.py", "test_protocol.py",
                  "test_modal_fit_independent.py", "test_engine.py", "test_duffing.py", "test_batch.py",
                  "test_viewer_blueprint.py")
