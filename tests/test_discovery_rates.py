@@ -149,7 +149,7 @@ def test_the_memory_benchmark_runs_both_ways_and_finds_the_structures_modes():
     """``ident bench memory`` on a short record: both runs (in processes of their own) find the two modes
     the record was made with (12 and 31 Hz, within 1 %), say nothing is found on a linear record, and the
     ratios line is printed."""
-    proc = subprocess.run([sys.executable, "-m", "ident", "bench", "memory", "--duration", "20", "--fs", "1000"],
+    proc = subprocess.run([sys.executable, "-m", "ident", "bench", "memory", "--duration", "12", "--fs", "1000"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     runs = [line for line in proc.stdout.splitlines() if "--max-samples" in line]
