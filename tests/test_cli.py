@@ -30,6 +30,9 @@ def test_duffing_json_has_the_documented_fields(quick_report):
     assert len(js["noise_sweep"]) == 4
     assert all(len(r["error_percent"]) == 3 and "eta" in r and "snr_db" in r for r in js["noise_sweep"])
     assert js["embedding"]["dimension"] == 3 and js["embedding"]["coefficients"]
+    # Table 3: x1's delay embedding, identified and integrated, reproduces the attractor (once a test of its
+    # own in test_duffing.py, which computed the same study on the same data a second time)
+    assert js["embedding"]["nrmse"] < 0.1 and js["embedding"]["error_percent"] < 5.0
 
 
 def test_duffing_report_folder(quick_report):
