@@ -91,6 +91,16 @@ def test_a_gain_that_is_only_the_refitted_linear_parts_is_not_a_finding(cases):
     assert all(x.own_gain > 0.03 for x in d.findings if x.baseline is not None), d.verdict()
 
 
+def test_a_baseline_worse_than_predicting_zero_is_said(cases):
+    # a one-mode baseline cannot describe a record with a stopper and blows: the answer says so, with the
+    # number the JSON holds, rather than a bare "nothing found" (checked on the project's own transitions
+    # recording through the command line until stop 58; that a note reaches stdout is test_discovery.py's)
+    _, d, _ = cases[3]
+    n0 = d.baseline_test_nrmse
+    assert n0 > 1.0 and d.verdict().startswith("nothing found")
+    assert any(f"worse than predicting zero (NRMSE {n0:.3g})" in note for note in d.notes), d.notes
+
+
 # A known miss since force gains lost their velocity feedthrough (``model.without_feedthrough``): right
 # before, not now (the README's discovery figures)
 
