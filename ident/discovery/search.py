@@ -9,10 +9,10 @@ blocks, and select honestly.
    nonlinear subspace method treats the nonlinear force as an extra input the same way). A shape with
    nonlinear parameters (a gap, a side, a slip displacement) is searched on a grid. Against a baseline
    fitted to the record each cause is also regressed with a spring and a damper at its coordinate
-   (``regressions`` with ``spring_damper_responses``): the baseline holds the cause's equivalent stiffness and damping, the
-   plain regression sees only what departs from them (a drag comes out a fiftieth of its size), and the
-   spring and damper take that part out again. Those candidates are scored only where the rest found
-   nothing (``discover``).
+   (``regressions`` given ``spring_damper_responses``): the baseline holds the cause's equivalent stiffness
+   and damping, the plain regression sees only what departs from them (a drag comes out a fiftieth of its
+   size), and the spring and damper take that part out again. Those candidates are scored only where the
+   rest found nothing (``discover``).
 3. Refinement. The regression is biased (displacement integrated from noisy accelerations, a linear part
    that absorbed some of the effect), so each cause's best location is refined by simulation error on
    training blocks (``refine``): coefficients scaled, a gap scanned and polished, and a fitted baseline
