@@ -350,13 +350,12 @@ def regressions(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: 
     lz = baseline.coordinate_modes(loc)
     signs = baseline.basis_signs(loc, gains)
     found, with_lin = [], []
-    lin = compensate
     for shp, cols in shapes(cause, z, v):
         X = np.concatenate([force_responses(model, prep, cols[:, c], gains)[rows] / scale[None, :, None]
                             for c in range(cols.shape[1])], axis=2).reshape(rows.size * scale.size, -1)
-        if lin is not None:
-            got = _compensated_fit(baseline, loc, cause, shp, cols.shape[1], np.hstack([X, lin]), target, tt, gains,
-                                   lz)
+        if compensate is not None:
+            got = _compensated_fit(baseline, loc, cause, shp, cols.shape[1], np.hstack([X, compensate]), target, tt,
+                                   gains, lz)
             if got is not None:
                 with_lin.append(got)
         try:
@@ -368,11 +367,8 @@ def regressions(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: 
         if not np.any(theta):
             continue
         r2 = 1.0 - float(np.sum((target - X @ theta) ** 2)) / tt
-        elements = []
-        for c in range(cols.shape[1]):
-            th = theta[c * len(gains):(c + 1) * len(gains)]
-            gain = sum(t_ * g for t_, g in zip(th, gains))
-            elements.append(Element(cause.code, law_parameters(cause, shp, c), lz, gain, loc.weights))
+        elements = [Element(cause.code, law_parameters(cause, shp, c), lz, gain, loc.weights)
+                    for c, gain in enumerate(column_gains(theta, gains, cols.shape[1]))]
         per_mass = [baseline.per_mass(loc, el.gain) for el in elements]
         if cause.positive and not all(pm > 0 for pm in per_mass):
             continue
@@ -411,6 +407,13 @@ def regressions(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: 
     return best, comp
 
 
+def column_gains(theta: np.ndarray, gains: list[np.ndarray], n_cols: int) -> list[np.ndarray]:
+    """Each regressed column's modal gain vector: its coefficients (one per basis vector in ``gains``, the
+    columns one after another in ``theta``) times the basis."""
+    ng = len(gains)
+    return [sum(t_ * g for t_, g in zip(theta[c * ng:(c + 1) * ng], gains)) for c in range(n_cols)]
+
+
 # the spring and the damper a compensated candidate adds at its coordinate, per unit modal mass
 COMPENSATION = ("compensation_stiffness_per_mass", "compensation_damping_per_mass")
 
@@ -427,10 +430,8 @@ def _compensated_fit(baseline: Baseline, loc: Location, cause, shp: dict, n_cols
     if not np.any(theta[:n_cols * len(gains)]):
         return None
     lin = CAUSES["linear_mismatch"]
-    ng = len(gains)
     elements = []
-    for c in range(n_cols + 2):
-        gain = sum(t_ * g for t_, g in zip(theta[c * ng:(c + 1) * ng], gains))
+    for c, gain in enumerate(column_gains(theta, gains, n_cols + 2)):
         p = law_parameters(cause, shp, c) if c < n_cols else law_parameters(lin, {}, c - n_cols)
         elements.append(Element(cause.code if c < n_cols else lin.code, p, lz, gain, loc.weights))
     per_mass = [baseline.per_mass(loc, el.gain) for el in elements]
