@@ -5,7 +5,7 @@ size; where nothing is hidden it must find nothing.
 
 The seeds are fixed; ``ident bench discovery`` runs many more (its figures are in the README). Four
 cases are discovered once and shared by the tests here: seed 2 is a two-sided contact near the tip of
-beam 1 under base excitation at 2 kHz; seed 1 a force-driven rig with nothing hidden at 2.5 kHz; seed 23
+beam 1 under base excitation at 2 kHz; seed 63 a force-driven rig with nothing hidden at 1 kHz (its tip-1 accelerometer clips); seed 23
 a force-driven Duffing oscillator with displacement output under an odd multisine at 610 Hz (26.8 Hz,
 3.6 % damping, hardening); seed 3 a two-sided contact at beam 1 under base excitation at 1 kHz with two
 unmeasured blows, whose one-mode baseline predicts worse than zero. Cases with a test of their own are
@@ -28,7 +28,7 @@ from ident.discovery.discover import noise_floor
 @pytest.fixture(scope="module")
 def cases():
     out = {}
-    for seed in (1, 2, 3, 23):
+    for seed in (2, 3, 23, 63):
         generated = discovery_case(seed)
         c = independent_case(seed, generated)
         out[seed] = (c, discover(c.measurement), generated.truth)
@@ -52,7 +52,7 @@ def test_a_hidden_contact_is_named_at_its_beam_with_its_gap(cases):
 
 
 def test_nothing_is_found_where_nothing_is_hidden(cases):
-    c, d, _ = cases[1]
+    c, d, _ = cases[63]
     assert c.cause == "none"
     assert d.findings == [] and d.verdict().startswith("nothing found")
 
@@ -151,7 +151,7 @@ def test_the_noise_floor_is_the_instruments_noise_band_passed_on_the_scored_bloc
     # noise (recorded minus its noise-free channels), band-passed in the time domain by scipy with the
     # Butterworth pair whose zero-phase magnitude the discovery's FFT filter uses (high-pass order 2, low-pass
     # order 4, each forward and backward), its RMS over the held-out blocks over each response's held-out std
-    c, d, _ = cases[1]
+    c, d, _ = cases[63]
     floor = noise_floor(d, c.measurement, c.reference)
     p, rows = d.prep, d.split.rows("test")
     lo, hi = p.band
