@@ -10,7 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from clitools import run_main
 from daq.viewer import ENTITIES
+from replay.cli import main as replay_main
 from replay.play import play
 from replay.formats.mcap import read_recording
 from replay.formats import read_samples as read_mcap
@@ -203,21 +205,21 @@ def test_csv_from_another_daq_with_other_column_names(tmp_path):
 def test_bad_csv_is_one_line_exit_2(tmp_path, content, args, match):
     path = tmp_path / "bad.csv"
     path.write_text(content)
-    p = cli("replay", str(path), "--max", *args)
-    assert p.returncode == 2
-    lines = p.stderr.strip().splitlines()
-    assert len(lines) == 1 and match in lines[0] and "Traceback" not in p.stderr
+    code, _, err, tb = run_main(replay_main, [path, "--max", *args])  # in-process: the entry point is below
+    lines = err.strip().splitlines()
+    assert tb is None and code == 2 and len(lines) == 1 and match in lines[0], (code, err, tb)
 
 
 def test_bad_files_are_one_line_exit_2(tmp_path):
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"not an mcap at all")
-    for args in (["replay", str(junk), "--max"], ["replay", "info", str(junk)],
-                 ["replay", str(tmp_path / "missing.mcap")], ["replay", str(tmp_path / "x.wav")],
-                 ["replay", str(REC / "linear.mcap"), "--start", "99"]):
-        p = cli(*args)
-        assert p.returncode == 2, args
-        assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, (args, p.stderr)
+    # the console entry point once, in a process of its own; the other cases through main() in this one
+    p = cli("replay", str(junk), "--max")
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, p.stderr
+    for args in (["info", junk], [tmp_path / "missing.mcap"], [tmp_path / "x.wav"],
+                 [REC / "linear.mcap", "--start", "99"]):
+        code, _, err, tb = run_main(replay_main, args)
+        assert tb is None and code == 2 and len(err.strip().splitlines()) == 1, (args, code, err, tb)
 
 
 def test_record_no_identify_still_monitors_regimes(tmp_path):
