@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
+from scipy.fft import next_fast_len
 from scipy.signal import csd, resample_poly, welch
 
 EXCITATIONS = ("force", "base_acceleration", "voltage")
@@ -244,14 +245,16 @@ def _operator(nfft: int, fs_hz: float, band: tuple[float, float], p: int) -> np.
 def convert(x: np.ndarray, fs_hz: float, band: tuple[float, float], from_order: int, to_order: int) -> np.ndarray:
     """Band-limited conversion along axis 0 between kinematic orders (0 displacement, 1 velocity,
     2 acceleration): multiply by (i 2 pi f)^(to - from) and the band's zero-phase gain, on the whole
-    record zero-padded to twice its length (the linear trend removed first)."""
+    record zero-padded to twice its length, rounded up to a length with small prime factors (the linear
+    trend removed first). Any length of at least twice the record keeps the circular filter's wrap-around
+    beyond the record; the next power of two was up to twice as long and half as fast."""
     x = np.asarray(x, float)
     n = x.shape[0]
     t = np.arange(n) - (n - 1) / 2
     x2 = x.reshape(n, -1)
     slope = (t @ x2) / max(float(t @ t), 1e-300)
     xd = x2 - np.outer(t, slope) - x2.mean(axis=0)
-    nfft = int(2 ** np.ceil(np.log2(2 * n)))
+    nfft = next_fast_len(2 * n, real=True)
     X = np.fft.rfft(xd, nfft, axis=0)
     X *= _operator(nfft, float(fs_hz), (float(band[0]), float(band[1])), to_order - from_order)[:, None]
     return np.fft.irfft(X, nfft, axis=0)[:n].reshape(x.shape)
