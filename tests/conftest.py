@@ -26,7 +26,8 @@ def pytest_configure(config):
 # workers that start on discovery both compile its kernels at once. One starts on discovery, one on the live
 # pipeline's kernels (``replay``), one on the paper's study (``cli``: SINDy's); each compiles its own and later
 # loads the others' from the cache.
-LONGEST_FIRST = ("test_discovery_independent_seeds.py", "test_replay.py", "test_cli.py", "test_discovery_independent.py",
+LONGEST_FIRST = ("test_discovery_independent_seeds.py", "test_replay.py", "test_cli.py",
+                 "test_discovery_independent.py",
                  "test_discovery_rates.py", "test_discovery.py", "test_discovery_parts.py", "test_bounded_inputs.py",
                  "test_record.py", "test_regimes.py", "test_protocol.py",
                  "test_modal_fit_independent.py", "test_engine.py", "test_duffing.py", "test_batch.py",

@@ -38,7 +38,7 @@ from scipy.optimize import minimize
 from scipy.stats import t as student_t, wilcoxon
 
 from .baselines import Baseline, Location, dominant_mode
-from .catalogue import (CAUSES, CONTACT, JOINT, ONSETS, SIDES, equivalent_coefficient, force_series, law_parameters,
+from .catalogue import (CAUSES, CONTACT, JOINT, ONSETS, SIDES, equivalent_coefficient, law_parameters,
                         shapes)
 from .model import NUMERIC_FAILURES, Element, LinearModel, force_response, lstsq, nudging_gain, simulate, substeps_for
 from .signals import MAX_SAMPLES, ORDER, Prepared, convert
