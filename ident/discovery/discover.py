@@ -223,9 +223,9 @@ def _within_budget(m: Measurement, fit_data: Measurement | None, train: slice | 
     if keep is not None and ex.measurement is not m:
         n = ex.measurement.n
         train, test = (slice(max(0, ex.index(s.start)), min(n, ex.index(s.stop))) for s in (tr, te))
-        for name, s, given in (("--train", train, tr), ("--test", test, te)):
+        for name, s, asked in (("--train", train, tr), ("--test", test, te)):
             if s.stop - s.start < MIN_SLICE:
-                raise ValueError(f"{name} {given.start}:{given.stop} keeps {s.stop - s.start} samples once decimated "
+                raise ValueError(f"{name} {asked.start}:{asked.stop} keeps {s.stop - s.start} samples once decimated "
                                  f"{ex.step} x to fit the memory budget; give at least {MIN_SLICE * ex.step} samples")
     if fit_data is not None:
         same_rate = fit_data.fs_hz == m.fs_hz
@@ -436,8 +436,8 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         # place first (independent seeds 0, 29, 87; 16 and 70 named the right cause first)
         say(f"nothing found; scoring {len(compensated)} causes regressed with their equivalent linear part "
             "taken out")
-        scored = sorted(scored + [score(c, baseline, prep, split, sc) for c in compensated],
-                        key=lambda c: -c.gain if np.isfinite(c.gain) else np.inf)
+        comp_scored = [score(c, baseline, prep, split, sc) for c in compensated]
+        scored = sorted(scored + comp_scored, key=lambda c: -c.gain if np.isfinite(c.gain) else np.inf)
         second = _select(findable(scored, fitted_here=fitted_here), baseline, prep, split, sc, settings, char)
         if second.findings and second.ambiguous[0]:
             options = " or ".join(c.label for c in [second.findings[0]] + second.ambiguous[0])
@@ -445,6 +445,8 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
                          f"{second.findings[0].gain:.2g} on held-out blocks; the data cannot separate them")
         else:
             sel = second
+        if not sel.findings:
+            notes += _linear_corrections(comp_scored, settings)
     notes += _set_aside(scored, sel.findings)
     ext_model, ext_out, ext_err, ext_blocks = baseline.model, (), n0, e0
     if sel.findings:
@@ -653,6 +655,20 @@ def sum_notes(findings: list[Candidate], by_loc: dict, names: tuple[str, ...] | 
                    f"so it is the relative motion between them (an interface) if one of the two sensors reads the "
                    f"other way round, and their common motion if both read as recorded; the mounting tells which")
     return out
+
+
+def _linear_corrections(comp_scored: list[Candidate], settings: Settings) -> list[str]:
+    """The best compensated candidate that ``significant`` turned down only because its own spring and
+    damper alone predict better than the baseline: a person should know that the fitted linear part is
+    off there, and that the cause on top of its correction is not a finding."""
+    held = [c for c in comp_scored if np.isfinite(c.gain) and not significant(c, settings)
+            and significant(replace(c, own_gain=max(c.own_gain, c.gain)), settings)]
+    if not held:
+        return []
+    c = max(held, key=lambda c: c.gain)
+    return [f"{c.label}, regressed with a spring and a damper at its coordinate, would gain {c.gain:.2g} on "
+            f"held-out blocks, but that spring and damper alone already predict better than the baseline: "
+            f"a correction of the fitted linear part with a cause on top, not a finding"]
 
 
 def _set_aside(scored: list[Candidate], findings: list[Candidate]) -> list[str]:
