@@ -443,6 +443,18 @@ def test_one_cause_at_another_place_is_a_look_alike_and_between_the_same_sensors
                            "on each side of the suspected element, or the excitation moved)")
 
 
+def test_a_look_alike_refined_and_as_regressed_is_named_once():
+    # independent seed 16 at stop 60: "cubic_stiffness at tip2 or contact at tip2 or contact at tip2", the
+    # contact's refined version and its regression both look-alikes of the cubic
+    rng = np.random.default_rng(3)
+    e = rng.uniform(0.18, 0.22, 40)
+    first = replace(_scored("cubic_stiffness", e * 0.86, 0.2), location="tip2")
+    contact = replace(_scored("contact", e * 0.87, 0.2), location="tip2")
+    alike = [replace(contact, refined=True), contact, replace(contact, location="tip1")]
+    d = Discovery(*[None] * 7, findings=[first], ambiguous=[alike], candidates=[], split=None, prep=None, warm=0)
+    assert d.verdict().startswith("ambiguous: cubic_stiffness at tip2 or contact at tip2 or contact at tip1 (")
+
+
 @pytest.mark.parametrize("k3,look_alike", [(-2.3e7, "hysteretic_joint at tip2+tip1"), (2.3e7, None)])
 def test_a_softening_cubic_has_a_significant_joint_between_the_same_sensors_as_its_look_alike(k3, look_alike):
     # independent seed 45's shape: a joint at tip 1 named a cubic there (k3 < 0: it softens) that beat the

@@ -3,7 +3,6 @@ commands on them (replay import keeps the holes our export marks, ident discover
 
 import argparse
 import os
-from pathlib import Path
 
 import numpy as np
 import pytest

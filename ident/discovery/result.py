@@ -58,12 +58,18 @@ class Discovery:
         parts = []
         for f, alike in zip(self.findings, self.ambiguous):
             if alike:
-                names = " or ".join([f.label] + [a.label for a in alike[:2]])
+                names = " or ".join(options(f, alike)[:3])
                 how = (PLACE if all(a.cause == f.cause for a in alike) else separating_test(f, alike))
                 parts.append(f"ambiguous: {names} ({how})")
             else:
                 parts.append(f"found {f.label} (held-out gain {f.gain:.2f}, p = {f.p_value:.1g})")
         return "; ".join(parts)
+
+
+def options(first: Candidate, alike: list[Candidate]) -> list[str]:
+    """The labels of a finding and its look-alikes, each once (a cause refined and as regressed at one place
+    are one answer), the finding's first."""
+    return list(dict.fromkeys([first.label] + [a.label for a in alike]))
 
 
 def separating_test(first: Candidate, alike: list[Candidate]) -> str:
