@@ -28,11 +28,11 @@ from .baselines.rig import RigBaseline
 from .catalogue import CAUSES
 from .characterise import characterise
 from .model import NUMERIC_FAILURES
-from .result import Discovery, softens
+from .result import Discovery, options, softens
 from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, block_errors, busiest,
-                     choose, clipped_ranges, clipping_candidates, clustered_p, gain_candidates, offset_findings,
-                     paired_p, pieces_per_block, predict, refine, regress, regressions, same_sensors, score, significant,
-                     simulation_bound, spring_damper_responses, train_error)
+                     choose, clipped_ranges, clipping_candidates, clustered_p, compensation, gain_candidates,
+                     offset_findings, paired_p, pieces_per_block, predict, refine, regress, regressions, same_sensors,
+                     score, significant, simulation_bound, spring_damper_responses, train_error)
 from .signals import (ORDER, Channel, Measurement, Prepared, convert, first_family, modal_band, prepare,
                       within_budget)
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
@@ -413,7 +413,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
             notes.append(f"{c.label}: refinement failed ({exc})")
     say(f"scoring {len(cands) + len(refined)} candidates on the held-out blocks")
     scored = [score(c, baseline, prep, split, sc) for c in cands + refined]
-    scored.sort(key=lambda c: -c.gain if np.isfinite(c.gain) else np.inf)
+    scored.sort(key=_by_gain)
     for c in scored:
         if c.note.startswith("failed"):
             notes.append(f"{c.label}: {c.note}")
@@ -437,15 +437,33 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         say(f"nothing found; scoring {len(compensated)} causes regressed with their equivalent linear part "
             "taken out")
         comp_scored = [score(c, baseline, prep, split, sc) for c in compensated]
-        scored = sorted(scored + comp_scored, key=lambda c: -c.gain if np.isfinite(c.gain) else np.inf)
+        scored = sorted(scored + comp_scored, key=_by_gain)
         second = _select(findable(scored, fitted_here=fitted_here), baseline, prep, split, sc, settings, char)
+        if second.findings:
+            # what leads is refined by simulation, as every leading cause of the first step is (its spring
+            # and damper scaled with it), and chosen again among all
+            again = []
+            for c in [second.findings[0]] + second.ambiguous[0]:
+                if not compensation(c) or c.refined:
+                    continue
+                say(f"refining by simulation: {c.label} with its spring and damper")
+                try:
+                    again.append(score(refine(c, baseline, by_loc[c.location], prep, split, warm, scale, bound,
+                                              settings, joint=False), baseline, prep, split, sc))
+                except NUMERIC_FAILURES as exc:
+                    notes.append(f"{c.label} with its spring and damper: refinement failed ({exc})")
+            if again:
+                comp_scored += again
+                scored = sorted(scored + again, key=_by_gain)
+                second = _select(findable(scored, fitted_here=fitted_here), baseline, prep, split, sc, settings,
+                                 char)
         if second.findings and second.ambiguous[0]:
-            options = " or ".join(c.label for c in [second.findings[0]] + second.ambiguous[0])
-            notes.append(f"with the equivalent linear part taken out, {options} would gain "
+            names = " or ".join(options(second.findings[0], second.ambiguous[0]))
+            notes.append(f"with the equivalent linear part taken out, {names} would gain "
                          f"{second.findings[0].gain:.2g} on held-out blocks; the data cannot separate them")
         else:
             sel = second
-        if not sel.findings:
+        if not second.findings:
             notes += _linear_corrections(comp_scored, settings)
     notes += _set_aside(scored, sel.findings)
     ext_model, ext_out, ext_err, ext_blocks = baseline.model, (), n0, e0
@@ -655,6 +673,11 @@ def sum_notes(findings: list[Candidate], by_loc: dict, names: tuple[str, ...] | 
                    f"so it is the relative motion between them (an interface) if one of the two sensors reads the "
                    f"other way round, and their common motion if both read as recorded; the mounting tells which")
     return out
+
+
+def _by_gain(c: Candidate) -> float:
+    """Sort key: the largest held-out gain first, a candidate without one (diverged, failed) last."""
+    return -c.gain if np.isfinite(c.gain) else np.inf
 
 
 def _linear_corrections(comp_scored: list[Candidate], settings: Settings) -> list[str]:

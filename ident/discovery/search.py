@@ -574,16 +574,18 @@ def train_error(baseline: Baseline, c: Candidate, prep: Prepared, segs, warm: in
 
 
 def _scaled(c: Candidate, baseline: Baseline, loc: Location, x: np.ndarray, shape: dict) -> Candidate:
-    """The candidate with each element's gain scaled by exp(x_e) and the given shape parameters."""
+    """The candidate with each element's gain scaled by exp(x_e) and the given shape parameters (the
+    cause's elements; a compensated candidate's spring and damper keep their laws, their gains scaled too)."""
     cause = CAUSES[c.cause]
+    n = len(c.elements) - len(compensation(c))
     els = []
     for e, el in enumerate(c.elements):
-        p = law_parameters(cause, shape, e) if cause.shape else el.p
+        p = law_parameters(cause, shape, e) if cause.shape and e < n else el.p
         els.append(Element(el.code, p, el.lz, el.gain * float(np.exp(x[e])), el.weights))
     per_mass = [baseline.per_mass(loc, el.gain) for el in els]
     shp = {p.name: shape[p.name] for p in cause.shape}
-    return replace(c, elements=tuple(els), parameters=_parameters(c.cause, shp, per_mass),
-                   physical=_physical(baseline, loc, c.cause, shp, els))
+    params = _parameters(c.cause, shp, per_mass[:n]) | dict(zip(COMPENSATION, per_mass[n:]))
+    return replace(c, elements=tuple(els), parameters=params, physical=_physical(baseline, loc, c.cause, shp, els[:n]))
 
 
 def joint_refit(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, split: Split, warm: int,
@@ -691,6 +693,13 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
     cause = CAUSES[c.cause]
     shape0 = {p.name: c.parameters[p.name] for p in cause.shape}
     n_el = len(c.elements)
+    n_cause = n_el - len(compensation(c))  # a compensated candidate's spring and damper come last
+
+    def lifted(lk: float) -> np.ndarray:
+        """A contact's or a joint's stiffness level for the cause's elements (its spring and damper stay)."""
+        x = np.zeros(n_el)
+        x[:n_cause] = lk
+        return x
 
     # how far a coefficient may move (log): a stopper's stiffness is uncertain by orders of magnitude
     # (displacement integrated from accelerations is smoothed over millisecond contacts), others are not
@@ -732,7 +741,7 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
                 for onset in ONSETS for fct in (0.5, 1.0, 2.0, 4.0) for lk in (0.0, 1.0, 2.0)]
     starts = [(shape0, 0.0)]
     if grid:
-        versions = [_scaled(c, baseline, loc, np.full(n_el, lk), shp) for shp, lk in grid]
+        versions = [_scaled(c, baseline, loc, lifted(lk), shp) for shp, lk in grid]
         scan = sorted((train_error(baseline, v, prep, segs[:2], warm, scale, bound), i)
                       for i, v in enumerate(versions) if holds(v))
         starts = [grid[i] for _, i in scan[:2]] or starts
@@ -748,7 +757,7 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
             return run(x, shape)
 
         x0 = np.zeros(n_el + len(free))
-        x0[:n_el] = lk
+        x0[:n_el] = lifted(lk)
         step = np.full(x0.size, 0.05)  # a gap or a slip is known from the scan within a few per cent
         step[:n_el] = 1.0 if reach > 2 else 0.3
         simplex = np.vstack([x0, x0 + np.diag(step)])
