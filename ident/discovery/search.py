@@ -676,7 +676,9 @@ def refine(c: Candidate, baseline: Baseline, loc: Location, prep: Prepared, spli
     coefficients are scaled (log, within a factor e^2, e^5 for a joint's stiffness and at least that for a
     stopper's, whose scan reaches 100 times the fastest mode's stiffness); a
     contact's side, gap and stiffness are scanned first (a stiff stopper's error is a narrow valley in
-    the gap), a joint's slip displacement is scaled too."""
+    the gap), a joint's slip displacement is scaled too. A compensated candidate (``regressions``) is refined
+    with ``joint=False``: its spring and damper are scaled with the cause and keep their laws, and a stiffness
+    level of the scans lifts the cause alone."""
     if not c.elements:
         return c
     base0 = baseline
