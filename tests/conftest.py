@@ -27,11 +27,10 @@ def pytest_configure(config):
 # pipeline's kernels (``replay``), one on the paper's study (``cli``: SINDy's); each compiles its own and later
 # loads the others' from the cache.
 LONGEST_FIRST = ("test_discovery_independent_seeds.py", "test_replay.py", "test_cli.py",
-                 "test_discovery_independent.py",
-                 "test_discovery_rates.py", "test_discovery.py", "test_discovery_parts.py", "test_bounded_inputs.py",
-                 "test_record.py", "test_regimes.py", "test_protocol.py",
-                 "test_modal_fit_independent.py", "test_engine.py", "test_duffing.py", "test_batch.py",
-                 "test_viewer_blueprint.py")
+                 "test_discovery_independent.py", "test_discovery_rates.py", "test_discovery.py",
+                 "test_discovery_parts.py", "test_bounded_inputs.py", "test_record.py", "test_regimes.py",
+                 "test_protocol.py", "test_modal_fit_independent.py", "test_engine.py", "test_duffing.py",
+                 "test_batch.py", "test_viewer_blueprint.py")
 
 
 def pytest_collection_modifyitems(items):
