@@ -426,6 +426,25 @@ def test_a_simpler_cause_gives_way_only_to_a_material_gain(margin, named):
     assert [c.cause for c in alike] == (["linear_mismatch"] if named == "sensor_gain" else [])
 
 
+@pytest.mark.parametrize("ratio,look_alike", [(1.005, False), (1.0, False), (0.995, True)])
+def test_a_more_complex_cause_that_predicts_no_better_is_no_look_alike(ratio, look_alike):
+    # rig seed 4's shape: a true sensor gain (one number) and a linear mismatch (two) whose held-out pieces
+    # scatter about the gain's at ``ratio`` of its mean, too noisy for the paired test to tell them apart
+    # either way; worse or equal, the mismatch is dominated (more numbers, no better prediction), better
+    # by any sliver it stays the gain's look-alike
+    rng = np.random.default_rng(2)
+    simple = rng.uniform(0.03, 0.04, 40)
+    noisy = simple * (1 + rng.normal(0, 0.2, 40))
+    noisy *= ratio * simple.mean() / noisy.mean()
+    gain, mismatch = _scored("sensor_gain", simple), _scored("linear_mismatch", noisy)
+    settings = Settings()
+    assert paired_p(simple, noisy) > settings.alpha and paired_p(noisy, simple) > settings.alpha
+    assert mismatch.test_nrmse == pytest.approx(ratio * gain.test_nrmse, rel=1e-12)
+    first, alike, _ = choose([mismatch, gain], settings)
+    assert first is gain
+    assert [c.cause for c in alike] == (["linear_mismatch"] if look_alike else [])
+
+
 def test_one_cause_at_another_place_is_a_look_alike_and_between_the_same_sensors_is_not():
     # independent seed 17's shape: a contact between a1 and a2 first, the same contact at a1 (to the
     # ground) within the noise of it, and its twin between the same sensors with the other sign convention
