@@ -39,14 +39,14 @@ def test_regime_spans_follow_the_transitions_programme():
 
 def test_regime_spans_of_a_slow_drive_need_a_longer_window():
     """A linear rig driven by a 6.5 Hz sine (3.25 periods in a 0.5 s window, fewer than MIN_PERIODS: the
-    window's leakage reads as distortion): with the default window the spans call it hitting; with the 1 s
+    window's leakage reads as distortion): with the default window the spans call a beam hitting; with the 1 s
     window that ``ident batch --regime-window 1`` gives, it is linear throughout."""
     fs = 1000.0
     t = np.arange(int(20 * fs)) / fs
     x = np.column_stack([np.sin(2 * np.pi * 6.5 * t), 10 * np.sin(2 * np.pi * 6.5 * t - np.pi / 2),
                          8 * np.sin(2 * np.pi * 6.5 * t - 1.2)]) + np.random.default_rng(0).normal(0, 0.01, (len(t), 3))
     short = regime_record(x, fs)
-    assert "impacting-both" in [span.regime for span in short.spans]
+    assert set(span.regime for span in short.spans) - {"linear"}  # a free beam read as hitting
     slow = short.slow_drive
     assert slow.drive_frequency_hz == pytest.approx(6.5, abs=0.1) and slow.periods == pytest.approx(3.25, abs=0.05)
     assert slow.t_s == pytest.approx(SLOW_WINDOWS * 0.25 + 0.25)  # windows end every 0.25 s from 0.5 s
