@@ -12,8 +12,8 @@ from daq.sim.sensors import to_counts
 from ident.live.pipeline import Pipeline, PipelineConfig
 from ident.live.regimes import (CROSS_BAND, CROSS_MARGIN, CROSS_MIN_WINDOWS, CROSS_QUANTILE, LABELS, MIN_PERIODS,
                                 PHASE_REFERENCE, PHASE_Z, SLOW_WINDOWS, Decision, RegimeConfig, RegimeMonitor, _cross_talk,
-                                _clipping, _gap_evidence, _half_phasors, _in_phase, _own_contact, decide, label_of,
-                                regime_start, regime_step, spectral_features)
+                                _clipping, _gap_evidence, _half_phasors, _in_phase, _leakage, _own_contact, decide,
+                                label_of, regime_start, regime_step, spectral_features)
 from ident.live.scoring import score_regimes, true_changes
 
 FS = 2000.0
@@ -587,9 +587,9 @@ def test_a_window_too_short_for_the_drive_is_said_and_a_longer_one_sees_a_linear
 
 
 @pytest.mark.parametrize("periods", [3.8, 4.3, 6.1])
-def test_a_pure_sine_leaves_no_harmonic_phasors_once_its_leakage_is_taken_out(periods):
-    """A pure sine's projection on its harmonics through a Hann window of a few periods is not zero (the
-    window's transform 2 and 4 harmonics away); the phasors at n f come out without that leakage, while a
+def test_a_pure_sine_leaves_no_third_harmonic_phasor_once_its_leakage_is_taken_out(periods):
+    """A pure sine's projection on its third harmonic through a Hann window of a few periods is not zero (the
+    window's transform 2 and 4 harmonics away); the phasor at 3 f comes out without that leakage, while a
     true third harmonic is kept. Computed here from the definition: the projection of the windowed sine,
     its mean removed, on exp(-2 pi i n f t). What is left of the leakage (about 2 %) comes from the drive
     frequency, which the monitor reads off the spectrum's peak."""
@@ -600,10 +600,14 @@ def test_a_pure_sine_leaves_no_harmonic_phasors_once_its_leakage_is_taken_out(pe
     w = np.hanning(n)
     raw = 2 * np.sum(w * (sine - sine.mean()) * np.exp(-2j * np.pi * 3 * f * t)) / w.sum()
     assert abs(raw) > 1e-4  # the leakage the monitor took for a third harmonic
+    c = np.array([1.0 + 2.0j, -0.5j])  # the closed form against the projection of the windowed sinusoids
+    s = (c[None, :] * np.exp(2j * np.pi * f * t)[:, None]).real
+    direct = 2 * (np.exp(-6j * np.pi * f * t) @ ((s - s.mean(axis=0)) * w[:, None])) / w.sum()
+    assert _leakage(c, 2 * np.pi * f / fs, n, w.sum()) == pytest.approx(direct, rel=1e-9)
     x = np.column_stack([sine, 10 * sine, 10 * sine + 0.05 * np.sin(2 * np.pi * 3 * f * t + 0.2)])
     sp = spectral_features(x, fs)
     assert sp.f_hz == pytest.approx(f, rel=1e-3)
-    assert np.max(np.abs(sp.harmonics[1:, :2] / sp.harmonics[0, :2])) < 0.05 * abs(raw)
+    assert np.max(np.abs(sp.harmonics[2, :2] / sp.harmonics[0, :2])) < 0.05 * abs(raw)
     # the true third harmonic of tip 2, 0.05 at phase 0.2 - pi/2 (a sine's phasor), within 2 % (its own image and
     # the drive frequency read off the peak; it was measured within 1.1 %)
     assert sp.harmonics[2, 2] == pytest.approx(0.05 * np.exp(1j * (0.2 - np.pi / 2)), abs=0.02 * 0.05)

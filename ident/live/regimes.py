@@ -98,6 +98,7 @@ stream into blocks gives the same output (tests/test_regimes.py proves it).
 
 from __future__ import annotations
 
+import cmath
 import math
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
@@ -445,8 +446,8 @@ class RegimeMonitor:
 class _Spectral:
     f_hz: float
     phasors: np.ndarray  # (3,) complex amplitudes at f
-    harmonics: np.ndarray  # (H, 3) complex amplitudes at n f, n = 1 .. H (H = PEAK_HARMONICS, below 0.45 fs); for
-    # n >= 2 less the fundamental's own leakage through the window (``_leakage``)
+    harmonics: np.ndarray  # (H, 3) complex amplitudes at n f, n = 1 .. H (H = PEAK_HARMONICS, below 0.45 fs); at
+    # 3 f less the fundamental's own leakage through the window (``_leakage``)
     fundamental: np.ndarray  # (3,) power in [0.5 f, 1.5 f]
     harmonic: np.ndarray  # (3,) power in [1.5 f, HARMONIC_TOP f] (distortion)
     odd: np.ndarray  # (3,) power within f / 4 of 3 f and 5 f
@@ -481,8 +482,8 @@ def spectral_batch(xs: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) 
     basis and its product with the window numpy's. The features are bit for bit those of the plain
     per-window numpy expressions the monitor had (every window of ``daq bench --regimes``' cached cases
     and of the recordings was checked); in numpy, one window at a time, they took half the monitor's
-    time in calls on small arrays. The harmonics' phasors then have the fundamental's own leakage through
-    the window taken out (``_leakage``, since stop 61).
+    time in calls on small arrays. The third harmonic's phasors then have the fundamental's own leakage
+    through the window taken out (``_leakage``, since stop 61).
     """
     xs = np.require(xs, float, "CW")  # one compiled signature
     n_w, n = xs.shape[0], xs.shape[1]
@@ -525,28 +526,45 @@ def spectral_batch(xs: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) 
     out = []
     for q in range(n_w):
         harmonics = 2 * (basis[q, :n_hs[q]] @ xw[q].T) / w_sum
-        if n_hs[q] > 1:  # the fundamental's own leakage through the window taken out of the harmonics
-            harmonics[1:] -= _leakage(harmonics[0], basis[q, :n_hs[q]], w, w_sum)[1:]
+        if n_hs[q] > 2:  # the fundamental's own leakage through the window taken out of the third harmonic
+            harmonics[2] -= _leakage(harmonics[0], 2 * np.pi * fs_[q] / fs_hz, n, float(w_sum))
         out.append(_Spectral(fs_[q], harmonics[0], harmonics, fund[q], harm[q], odd[q], imp[q],
                              (int(bins[q, 0]), int(bins[q, 1]), int(bins[q, 2])), floor[q], scale, phasor,
                              float(envelope[q])))
     return out
 
 
-def _leakage(fundamental: np.ndarray, basis: np.ndarray, w: np.ndarray, w_sum: float) -> np.ndarray:
-    """The phasors at n f (H, 3) that the fundamental alone (each channel's phasor at f) puts there through the
-    window: the sinusoid made again from its phasor, its mean removed and windowed as the data are, and
-    projected on the same basis (``basis``: exp(-2 pi i n f t), n = 1 .. H).
+def _geometric(theta: float, n: int) -> complex:
+    """sum_{t < n} e^{i theta t} (theta not a multiple of 2 pi)."""
+    return (1 - cmath.exp(1j * theta * n)) / (1 - cmath.exp(1j * theta))
+
+
+def _hann_sum(theta: float, n: int) -> complex:
+    """sum_t w_t e^{i theta t} of numpy's Hann window of n samples, w_t = (1 - cos(2 pi t / (n - 1))) / 2."""
+    phi = 2 * math.pi / (n - 1)
+    return 0.5 * _geometric(theta, n) - 0.25 * (_geometric(theta + phi, n) + _geometric(theta - phi, n))
+
+
+def _leakage(fundamental: np.ndarray, omega: float, n: int, w_sum: float) -> np.ndarray:
+    """The phasor at 3 f (3,) that the fundamental alone (each channel's phasor c at f; ``omega`` = 2 pi f / fs
+    per sample) puts there through the window: the sinusoid Re(c e^{i omega t}), its mean removed and
+    windowed as the data are, projected as the harmonics are (2 / sum(w) sum_t w_t (.) e^{-3 i omega t}):
+    c P + conj(c) Q, with P = (W(-2 omega) - m W(-3 omega)) / sum(w), Q = (W(-4 omega) - conj(m) W(-3 omega))
+    / sum(w), W(theta) the Hann window's sum against e^{i theta t} and m the mean of e^{i omega t} over the
+    window, all in closed form (``_hann_sum``; a window's sums would cost the monitor a tenth of its time).
 
     A pure sine's projection on its third harmonic is not zero in a window of a few periods: the Hann
     window's transform two and four harmonics away from the fundamental. A linear rig with 60 dB of sensor
     noise driven at 7.6 Hz (3.8 periods; ``tests/test_regimes.py``'s sine rig): the clipping rule's sum over
     three windows stood more than PHASE_Z noise deviations out, in the phase a stopper gives (``_clipping``),
     in 32 % of the beam-windows (up to 11.8) with the leakage left in, 1 % with it taken out (at 9.2 Hz 3 %
-    either way)."""
-    s = (fundamental[None, :] * basis[0].conj()[:, None]).real  # (n, 3): Re(c e^{i w t})
-    s = (s - s.mean(axis=0)) * w[:, None]
-    return 2 * (basis @ s) / w_sum
+    either way). Only the third harmonic is corrected: the phase rules read it, and the others enter only
+    the reconstructed peak displacement, where the leakage is a few parts in ten thousand."""
+    w3 = _hann_sum(-3 * omega, n)
+    m = _geometric(omega, n) / n
+    p = (_hann_sum(-2 * omega, n) - m * w3) / w_sum
+    q = (_hann_sum(-4 * omega, n) - m.conjugate() * w3) / w_sum
+    return fundamental * p + fundamental.conj() * q
 
 
 @njit(cache=True, nogil=True)
