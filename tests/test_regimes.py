@@ -580,7 +580,7 @@ def test_a_window_too_short_for_the_drive_is_said_and_a_longer_one_sees_a_linear
     assert len(notes) == 1 and notes[0]["t"] == pytest.approx(SLOW_WINDOWS * 0.25 + 0.25)
     assert "--regime-window 1 or more" in notes[0]["message"]
     # what the note warns of: a free beam reads as hitting (at 6.5 Hz one of the two since the fundamental's
-    # leakage is taken out of the harmonics' phasors; the band powers still hold it)
+    # leakage is taken out of the third harmonic's phasor; the band powers still hold it)
     assert out.windows[-1].label != "linear"
     windows, changes = RegimeMonitor(RegimeConfig(fs_hz=1000.0, window_s=1.0)).step(sine_rig(f_hz))
     assert changes == [] and all(w.label == "linear" for w in windows)

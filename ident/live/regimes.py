@@ -535,8 +535,10 @@ def spectral_batch(xs: np.ndarray, fs_hz: float, min_frequency_hz: float = 2.0) 
 
 
 def _geometric(theta: float, n: int) -> complex:
-    """sum_{t < n} e^{i theta t} (theta not a multiple of 2 pi)."""
-    return (1 - cmath.exp(1j * theta * n)) / (1 - cmath.exp(1j * theta))
+    """sum_{t < n} e^{i theta t} (n where e^{i theta} is 1: a short window can put 2 f at the Hann window's
+    own frequency, 1 / (2 window), above the 2 Hz floor of drive frequencies)."""
+    z = cmath.exp(1j * theta)
+    return complex(n) if abs(1 - z) < 1e-12 else (1 - cmath.exp(1j * theta * n)) / (1 - z)
 
 
 def _hann_sum(theta: float, n: int) -> complex:
