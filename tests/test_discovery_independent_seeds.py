@@ -4,7 +4,7 @@ from ``ident``), one generated case per test; the four cases the tests share are
 
 Seed 34 is a base-driven rig with nothing hidden and one unmeasured blow on beam 2 at 19.65 s; seed 12
 another with two blows on beam 1, 3.5 s apart; seed 47 a strongly hardening Duffing oscillator (26.2 Hz,
-1 % damping, displacement out) under an odd multisine; seeds 64 and 66 clamped-clamped beams (membrane
+1 % damping, displacement out) under an odd multisine; seeds 31 and 66 clamped-clamped beams (membrane
 stretching) hit by a hammer, one velocity sensor each.
 """
 
@@ -85,47 +85,49 @@ def test_a_strong_cubic_is_found_where_the_linear_fit_explains_a_fifth_of_the_mo
 
 
 def test_a_hardening_hammer_decay_on_one_sensor_gets_one_mode_and_its_cubic():
-    # independent seed 64: a clamped-clamped beam (membrane stretching) hit by a hammer, one velocity
-    # sensor. Its decay glides in frequency with amplitude; the order search kept two modes 2.5 Hz apart
-    # (192.6 and 195.1 Hz, bandwidths 1.9 and 2.4 Hz) where the beam has one, and a quadratic stiffness
-    # was named. One response cannot tell such a pair from one gliding mode, so the pair is no order
-    generated = discovery_case(64)
-    c = independent_case(64, generated)
+    # independent seed 31: a clamped-clamped beam (membrane stretching) hit by a hammer, one velocity
+    # sensor. Its decay glides in frequency with amplitude (3 % at the hit); without the rule that two modes
+    # closer than their bandwidths on one response are one gliding mode, the order search keeps four modes
+    # and a Coulomb friction is named (gain 0.50)
+    generated = discovery_case(31)
+    c = independent_case(31, generated)
     eq = generated.truth["equivalent"]
     d = discover(c.measurement)
     assert d.baseline.model.poles.size == 1
     v = judge(c, d, 0.0)
     assert v.right and v.extra == 0, d.verdict()
     f = d.findings[0]
-    # the linear part refitted with the cubic force in place is the beam's first mode: 185.86 / 185.84 Hz,
-    # 0.235 / 0.229 % damping
+    # the linear part refitted with the cubic force in place is the beam's first mode: 167.72 / 167.74 Hz,
+    # 0.222 / 0.213 % damping
     (pole,) = f.baseline.model.poles
     f0 = eq["natural_frequency_hz"]
     assert abs(pole) / (2 * np.pi) == pytest.approx(f0, rel=0.005)
     assert -pole.real / abs(pole) == pytest.approx(eq["damping_ratio"], rel=0.10)
     assert f.gain > 0.9 and f.own_gain > 0.5
-    # the coefficient is what the record's own backbone says (2.53e12 against 2.32e12 per kg): the
-    # frequency at the first mode's amplitude A over the decay, f = f0 (1 + 3/8 k3 A^2 / w0^2), read off
-    # the analytic signal of the band-passed velocity. The generator's one-mode equivalent (1.19e12)
-    # predicts half the glide the record shows (the membrane couples the modes the hit excites)
+    # the record's own backbone (the frequency at the first mode's amplitude A over the decay,
+    # f = f0 (1 + 3/8 k3 A^2 / w0^2), read off the analytic signal of the band-passed velocity) is the
+    # generator's one-mode equivalent (6.65e11 against 6.67e11 per kg); the coefficient found is 7.22e11
     k3 = _backbone_k3(c.measurement.responses[0].values, c.measurement.fs_hz, f0,
                       generated.truth["structure"]["hit_time_s"])
-    assert f.parameters["coefficient_per_mass"] == pytest.approx(k3, rel=0.15)
-    assert k3 > 1.5 * eq["k3_per_mass"]
+    assert k3 == pytest.approx(eq["k3_per_mass"], rel=0.05)
+    assert f.parameters["coefficient_per_mass"] == pytest.approx(eq["k3_per_mass"], rel=0.15)
 
 
-def test_a_hammer_decays_backbone_settles_a_cubic_against_a_quadratic_stiffness():
-    # independent seed 66: a clamped-clamped beam hit by a hammer, one velocity sensor. On 8 held-out
-    # blocks a cubic (gain 0.71) and a quadratic stiffness (0.59) could not be told apart; the decay's
-    # own backbone can: its shift follows amplitude^2 (a cubic), not amplitude (k2 z|z|)
-    c = independent_case(66)
+def test_a_weaker_hardening_decay_gets_its_cubic_and_its_coefficient():
+    # independent seed 66: a clamped-clamped beam hit by a hammer, one velocity sensor, 0.78 % damping:
+    # the cubic leads (held-out gain 0.94) a quadratic stiffness (0.82) by more than the paired test's
+    # spread, and its coefficient is the generator's one-mode equivalent within 11 % (4.54e11 against
+    # 4.08e11 per kg; the record's own backbone says 4.18e11)
+    generated = discovery_case(66)
+    c = independent_case(66, generated)
     d = discover(c.measurement)
     v = judge(c, d, 0.0)
     assert v.right and v.extra == 0 and d.ambiguous == [[]], d.verdict()
-    bb = d.characterisation["v1"]["backbone"]
-    rms = bb["rms_hz_by_power"]
-    assert rms[2.0] * 3 < rms[1.0]
-    assert any("backbone" in n and "quadratic_stiffness at v1 set aside" in n for n in d.notes)
+    f = d.findings[0]
+    assert f.parameters["coefficient_per_mass"] == pytest.approx(generated.truth["equivalent"]["k3_per_mass"],
+                                                                 rel=0.15)
+    quadratic = [x for x in d.candidates if x.cause == "quadratic_stiffness"]
+    assert quadratic and max(x.gain for x in quadratic) < f.gain
 
 
 def _backbone_k3(velocity: np.ndarray, fs: float, f0: float, hit_s: float) -> float:
