@@ -15,13 +15,13 @@ from ident.discovery import Channel, Measurement
 from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
 from ident.cli.bench_discovery import independent_case, judge
-from ident.discovery.backbone import free_decay
+from ident.discovery.backbone import CLEAR, free_decay
 from ident.discovery.discover import _softening_look_alike, _warm, noise_floor, sum_notes
 from ident.discovery.baselines.modal import (Columns, ModalBaseline, _design, drivable, fit_model, peak_poles,
                                              underlying_poles)
 from ident.discovery.baselines.rig import RigBaseline
-from ident.discovery.catalogue import (CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, equivalent_coefficient, force_series,
-                                      law_parameters)
+from ident.discovery.catalogue import (CAUSES, CONTACT, CUBIC, JOINT, N_IWAN, describing_stiffness,
+                                      equivalent_coefficient, force_series, law_parameters)
 from ident.discovery.baselines import Location
 from ident.discovery.result import Discovery
 from ident.discovery.model import (Element, LinearModel, mode_states, nudging_gain, simulate, substeps_for,
@@ -676,6 +676,44 @@ def test_a_linear_decays_backbone_separates_nothing():
     y, u, fs = _free_decay(lambda z: 0.0)
     bb = free_decay("x", y, u, fs, 50.0)
     assert bb.follows({1.0, 2.0}) is None and abs(bb.line(2.0)[1]) < 0.05
+
+
+@pytest.mark.parametrize("cause, parameters", [
+    ("cubic_stiffness", {"coefficient_per_mass": 3e9}),
+    ("quadratic_stiffness", {"coefficient_per_mass": -2e6}),
+    ("contact", {"stiffness_per_mass": 4e5, "gap": 4e-4, "side": "both"}),
+    ("contact", {"stiffness_per_mass": 4e5, "gap": 4e-4, "side": "negative"})])
+def test_a_laws_describing_stiffness_is_its_force_on_a_cosine_projected_on_the_cosine(cause, parameters):
+    # first harmonic by quadrature of the catalogue's own compiled law: (1 / (pi A)) int f(A cos t) cos t dt
+    c = CAUSES[cause]
+    shape = {p.name: parameters[p.name] for p in c.shape}
+    p = law_parameters(c, shape) * 1.0
+    p[0] = parameters[c.coefficients[0].name]
+    t = np.linspace(0.0, 2 * np.pi, 20001)[:-1]
+    for a in (1e-4, 3.9e-4, 4.1e-4, 6e-4, 2e-3):
+        f = force_series(c.code, p, a * np.cos(t), np.zeros_like(t))
+        quadrature = 2.0 * np.mean(f * np.cos(t)) / a
+        expected = describing_stiffness(cause, parameters, np.array([a]))[0]
+        assert expected == pytest.approx(quadrature, rel=1e-3, abs=1e-9 * abs(p[0]))
+    assert describing_stiffness("coulomb_friction", {"force_per_mass": 1.0}, np.ones(3)) is None
+
+
+def test_a_stoppers_decay_is_told_from_a_cubics_by_its_backbones_shape():
+    # a two-sided stopper at 0.25 mm, 2 x the mode's stiffness beyond it, rings down from 0.95 mm: its
+    # decay glides until the amplitude falls to the gap, then not at all; a cubic's glides on as A^2
+    w0 = 2 * np.pi * 50
+    gap = 2.5e-4
+    y, u, fs = _free_decay(lambda z: 2 * w0**2 * np.sign(z) * max(abs(z) - gap, 0.0))
+    bb = free_decay("x", y, u, fs, 50.0)
+    a = bb.amplitude  # displacement: the decay above is one
+    contact = bb.shape_error(describing_stiffness("contact", {"stiffness_per_mass": 2 * w0**2, "gap": gap,
+                                                              "side": "both"}, a))
+    cubic = bb.shape_error(describing_stiffness("cubic_stiffness", {"coefficient_per_mass": 1.0}, a))
+    quadratic = bb.shape_error(describing_stiffness("quadratic_stiffness", {"coefficient_per_mass": 1.0}, a))
+    assert contact * CLEAR < min(cubic, quadratic)
+    # a softening law's shape cannot follow a hardening glide: no better than no glide at all
+    softening = bb.shape_error(describing_stiffness("cubic_stiffness", {"coefficient_per_mass": -1.0}, a))
+    assert softening == pytest.approx(float(np.std(bb.frequency_hz)))
 
 
 def test_a_joints_truth_is_the_stiffness_it_loses_when_every_element_slips():

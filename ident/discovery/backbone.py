@@ -6,7 +6,10 @@ the stiffness the motion sees. First-order harmonic balance (Worden & Tomlinson 
 Mook 1979) gives the shape of that backbone for each smooth stiffness law:
 
 - a cubic k3 z^3:        w(A) = w0 (1 + 3/8 k3 A^2 / w0^2)       the shift grows with A^2;
-- k2 z |z|:              w(A) = w0 (1 + 4/(3 pi) k2 A / w0^2)     the shift grows with A.
+- k2 z |z|:              w(A) = w0 (1 + 4/(3 pi) k2 A / w0^2)     the shift grows with A;
+- a stopper beyond gap g: no shift below g, then one that grows towards its stiffness's
+  (``catalogue.describing_stiffness`` gives each law's equivalent stiffness, ``Backbone.shape_error``
+  fits the measured backbone against it).
 
 So where the held-out error cannot tell a cubic from a quadratic stiffness (both bend the decay's
 frequency; the paired test over a few blocks has no power to separate them), the decay's own backbone
@@ -56,6 +59,16 @@ class Backbone:
         if len(errs) < 2 or errs[1][0] < CLEAR * max(errs[0][0], 1e-12):
             return None
         return errs[0][1]
+
+    def shape_error(self, stiffness: np.ndarray) -> float:
+        """RMS error (Hz) of the best line of frequency against a law's describing stiffness at each point's
+        amplitude (``catalogue.describing_stiffness``), its slope kept >= 0: the law's shape, its scale
+        free (a decay glides the way the law's own sign says, or the law fits it no better than no glide)."""
+        x = np.asarray(stiffness, float)
+        X = np.column_stack([np.ones_like(x), x])
+        coef = np.linalg.lstsq(X, self.frequency_hz, rcond=None)[0]
+        fit = X @ coef if coef[1] > 0 else np.full_like(x, self.frequency_hz.mean())
+        return float(np.sqrt(np.mean((self.frequency_hz - fit) ** 2)))
 
     def as_json(self) -> dict:
         f0, shift, _ = self.line(2.0)

@@ -67,7 +67,6 @@ class Cause:
     positive: bool = True
     kind: str = "mechanical"  # or "sensor"
     separates_by: str = ""  # the test that would tell this cause from a look-alike
-    backbone_power: float | None = None  # a free decay's frequency shift grows with amplitude**power
     # a refit of a fitted linear part with the cause in place also starts from these strengths: shares of
     # the location's mode's stiffness (omega^2) or damping (2 zeta omega), as ``equivalent_coefficient``
     starts: tuple[float, ...] = ()
@@ -96,7 +95,7 @@ CAUSES: dict[str, Cause] = {c.name: c for c in (
           # (held-out gain 0.29 where the refinement from the regression reached 0.03)
           starts=(1.0, 10.0, 100.0)),
     Cause("cubic_stiffness", CUBIC, (Parameter("coefficient_per_mass", "1/(m^2 s^2)", "k3 per modal mass"),),
-          positive=False, backbone_power=2.0,
+          positive=False,
           separates_by="a stepped sine at three or more levels: a cubic's frequency shift grows with amplitude^2",
           # a softening cubic is also how a joint that slips looks over the amplitudes a record holds: where
           # the joint fits significantly and nearly as well too, it is the finding's look-alike
@@ -105,7 +104,7 @@ CAUSES: dict[str, Cause] = {c.name: c for c in (
           separates_softening="a stepped sine at several levels: a joint's damping grows with amplitude as it "
                               "slips, a cubic's does not"),
     Cause("quadratic_stiffness", QUADRATIC, (Parameter("coefficient_per_mass", "1/(m s^2)", "k2 per modal mass"),),
-          positive=False, backbone_power=1.0,
+          positive=False,
           separates_by="a stepped sine at three or more levels: the shift grows with amplitude, not its square"),
     Cause("coulomb_friction", COULOMB, (Parameter("force_per_mass", "m/s^2", "friction force per modal mass"),),
           separates_by="a low level: dry friction damps small motion most (equivalent damping ~ 1/amplitude)",
@@ -234,6 +233,28 @@ def shapes(cause: Cause, z: np.ndarray, v: np.ndarray, n_grid: int = 24) -> list
     if cause.code == LINEAR:
         return [({}, np.column_stack([z, v]))]
     return [({}, _law_series(cause.code, law_parameters(cause, {}), z, v)[:, None])]
+
+
+def describing_stiffness(cause: str, parameters: dict, amplitude: np.ndarray) -> np.ndarray | None:
+    """A stiffness law's first-order equivalent stiffness per unit modal mass on a sinusoid of displacement
+    amplitude ``amplitude`` at its location (describing functions, Worden & Tomlinson 2001, ch. 2): a free
+    decay's backbone follows w(A)^2 = w0^2 + this. None for a law that is no stiffness of amplitude (a
+    damper, a joint's hysteresis, a linear mismatch, a sensor).
+
+    - cubic k3 z^3: 3/4 k3 A^2;  quadratic k2 z|z|: 8 / (3 pi) k2 A;
+    - a stopper k beyond the gap g on both sides: k (1 - 2/pi (asin(g/A) + g/A sqrt(1 - (g/A)^2))) for
+      A > g, nothing below; on one side, half of it (to first order: the offset one side's push gives the
+      motion is left out)."""
+    a = np.abs(np.asarray(amplitude, float))
+    if cause == "cubic_stiffness":
+        return 0.75 * parameters["coefficient_per_mass"] * a**2
+    if cause == "quadratic_stiffness":
+        return 8.0 / (3.0 * np.pi) * parameters["coefficient_per_mass"] * a
+    if cause == "contact":
+        r = np.clip(parameters["gap"] / np.maximum(a, 1e-300), 0.0, 1.0)
+        share = 1.0 - 2.0 / np.pi * (np.arcsin(r) + r * np.sqrt(1.0 - r**2))
+        return parameters["stiffness_per_mass"] * share * (1.0 if parameters["side"] == "both" else 0.5)
+    return None
 
 
 def equivalent_coefficient(cause: Cause, level: float, omega: float, zeta: float, v_rms: float) -> float:

@@ -21,11 +21,11 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ..rig import RigParams
-from .backbone import free_decay
+from .backbone import CLEAR, free_decay
 from .baselines import Baseline
 from .baselines.modal import ModalBaseline, check_errors, drivable, structural
 from .baselines.rig import RigBaseline
-from .catalogue import CAUSES
+from .catalogue import CAUSES, describing_stiffness
 from .characterise import characterise
 from .model import NUMERIC_FAILURES
 from .result import Discovery, options, softens
@@ -485,20 +485,33 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
                      split, prep, warm, [prep.start_s + t / prep.fs_hz for t in onsets], resid_rms, char, notes)
 
 
-def _settle_by_backbone(first: Candidate, alike: list[Candidate], prep: Prepared,
-                        char: dict) -> tuple[Candidate, list[Candidate], str]:
-    """A hammer-hit record rings down through every amplitude: where the first finding's look-alikes
-    include a cause whose backbone has another shape (a cubic's shift grows with amplitude^2, a quadratic
-    stiffness's with amplitude), the decay's measured backbone at the finding's response settles it
-    (``backbone``). Returns the first finding, its look-alikes left and the reason ("" if unsettled); the
-    backbone goes into the characterisation."""
-    if not (prep.transient and alike) or first.location not in prep.names:
+def _settle_by_backbone(first: Candidate, alike: list[Candidate], scored: list[Candidate], prep: Prepared,
+                        char: dict, settings: Settings) -> tuple[Candidate, list[Candidate], str]:
+    """A hammer-hit record rings down through every amplitude, and its free decays' backbone (``backbone``)
+    shows the stiffness law directly: a cubic's glide grows with amplitude^2, a quadratic stiffness's with
+    amplitude, a stopper's starts at its gap. Where the first finding and the significant candidates at its
+    response include stiffness laws of two causes or more, each candidate's shape (its describing
+    stiffness at the backbone's amplitudes, ``catalogue.describing_stiffness``, its scale free) is fitted
+    to the measured backbone; a cause whose shape fits ``backbone.CLEAR`` times worse than the best is set
+    aside, the first finding too (then the best-gaining candidate of a cause that fits takes its place).
+    The held-out error over a hammer record's few blocks weighs the linear part's and the damping's errors
+    with the law's; the backbone weighs the law alone (a stopper's decay glides down to its gap and no
+    further, a cubic's on as amplitude^2: ``test_discovery_parts``). Returns the first finding, its
+    look-alikes left and the reason ("" if unsettled); the backbone goes into the characterisation."""
+    if not prep.transient or first.location not in prep.names:
         return first, alike, ""
-    here = [c for c in [first] + alike if c.location == first.location]
-    powers = {CAUSES[c.cause].backbone_power for c in here} - {None}
-    if len(powers) < 2:
+    probe = np.ones(1)
+    stiff = lambda c: CAUSES[c.cause].kind == "mechanical" and describing_stiffness(  # noqa: E731
+        c.cause, c.parameters, probe) is not None
+    here, seen = [], set()
+    for c in [first] + alike + [c for c in scored if significant(c, settings)]:
+        if c.location == first.location and id(c) not in seen and stiff(c):
+            here.append(c)
+            seen.add(id(c))
+    if len({c.cause for c in here}) < 2 or not stiff(first):
         return first, alike, ""
-    y = prep.measured[:, prep.names.index(first.location)]
+    k = prep.names.index(first.location)
+    y = prep.measured[:, k]
     spectrum = np.abs(np.fft.rfft(y * np.hanning(y.size)))
     f = np.fft.rfftfreq(y.size, 1.0 / prep.fs_hz)
     inband = (f >= prep.band[0]) & (f <= prep.band[1])
@@ -508,20 +521,24 @@ def _settle_by_backbone(first: Candidate, alike: list[Candidate], prep: Prepared
     if bb is None:
         return first, alike, ""
     char.setdefault(first.location, {})["backbone"] = bb.as_json()
-    power = bb.follows(powers)
-    if power is None:
+    displacement = bb.amplitude / (2 * np.pi * bb.frequency_hz) ** ORDER[prep.kinds[k]]
+    errs: dict[str, float] = {}
+    for c in here:
+        e = bb.shape_error(describing_stiffness(c.cause, c.parameters, displacement))
+        errs[c.cause] = min(errs.get(c.cause, np.inf), e)
+    best = min(errs.values())
+    out = {cause for cause, e in errs.items() if e >= CLEAR * max(best, 1e-12)}
+    if not out:
         return first, alike, ""
-    # the power the decay follows is some candidate's here, so at least one candidate stays
-    out = {c.label for c in here if CAUSES[c.cause].backbone_power not in (None, power)}
-    keep = [c for c in [first] + alike if c.label not in out]
-    if first.label in out:
-        first = max(keep, key=lambda c: c.gain)
-    errs = {p: bb.line(p)[2] for p in powers}
-    other = min(errs[p] for p in powers if p != power)
-    reason = (f"the free decays' backbone at {first.location} ({bb.mode_hz:.1f} Hz): its frequency shift grows "
-              f"with amplitude^{power:g} (a line {errs[power]:.2g} Hz off, against {other:.2g} Hz for the other "
-              f"power): {', '.join(sorted(out))} set aside")
-    return first, [c for c in keep if c is not first], reason
+    kept = [c for c in [first] + alike if c.cause not in out or not stiff(c)]
+    if first.cause in out:
+        fitting = [c for c in here if c.cause not in out]
+        first = max(fitting, key=lambda c: c.gain)
+        kept = [first] + [c for c in kept if c is not first]
+    shapes = ", ".join(f"{cause} {e:.2g} Hz" for cause, e in sorted(errs.items(), key=lambda t: t[1]))
+    reason = (f"the free decays' backbone at {first.location} ({bb.mode_hz:.1f} Hz) against each stiffness law's "
+              f"shape (RMS off its best line: {shapes}): {', '.join(sorted(out))} set aside")
+    return first, [c for c in kept if c is not first], reason
 
 
 SOFTENING_SHARE = 0.75  # a softening cubic's joint look-alike gains at least this share of the cubic's gain
@@ -713,7 +730,7 @@ def _select(scored: list[Candidate], baseline: Baseline, prep: Prepared, split: 
     if first is None:
         return Selection([], [], [why])
     # the record's own backbone may settle look-alikes before a second finding is sought on top of the first
-    first, alike, settled = _settle_by_backbone(first, alike, prep, char)
+    first, alike, settled = _settle_by_backbone(first, alike, scored, prep, char, settings)
     alike = _softening_look_alike(first, alike, scored, settings) + alike  # first, so the verdict names it
     reasons = [settled] if settled else []
     findings, ambiguous = [first], [alike]
