@@ -636,8 +636,27 @@ def test_a_chain_elements_coefficient_is_judged_against_the_element_not_a_one_ma
     per_mass = generated.truth["equivalent"]["k3_per_mass"]
     found = Candidate("cubic_stiffness", "a2-a3", {"coefficient_per_mass": 511 * per_mass},
                       physical={"coefficient_n_per_m3": 1.05 * k3, "modal_mass_kg": 2.6}, gain=0.8)
-    v = judge(c, SimpleNamespace(findings=[found], ambiguous=[[]], baseline_test_nrmse=0.1), 1.0)
+    v = judge(c, SimpleNamespace(findings=[found], ambiguous=[[]], baseline_test_nrmse=0.1,
+                                 per_mass_mode_hz=lambda _: None), 1.0)
     assert v.right and v.extra == 0 and v.parameter_error == pytest.approx(0.05)
+
+
+def test_a_per_mass_coefficient_is_judged_in_the_mode_it_is_per_modal_mass_of():
+    # independent seed 6: a cubic at 72 % of beam 2's span, the rig's beams coupled at 8.89 and 9.46 Hz
+    # (beam 2 alone 8.92 Hz). Per modal mass the cubic is 6.0e7 in the beam's own mode, 2.7e7 and 3.2e7 in
+    # the rig's two: a finding per modal mass of the 8.89 Hz mode is judged against 2.7e7, one of the
+    # 9.46 Hz mode against 3.2e7, one of a mode far from both against the beam's own
+    generated = discovery_case(6)
+    c = independent_case(6, generated)
+    modes = generated.truth["equivalent_modes"]
+    assert [round(m["natural_frequency_hz"], 2) for m in modes] == [8.89, 9.46]
+    found = Candidate("cubic_stiffness", "tip2", {"coefficient_per_mass": 1.1 * modes[0]["k3_per_mass"]}, gain=0.4)
+    for hz, expected in ((8.95, modes[0]["k3_per_mass"]), (9.4, modes[1]["k3_per_mass"]),
+                         (20.0, generated.truth["equivalent"]["k3_per_mass"])):
+        d = SimpleNamespace(findings=[found], ambiguous=[[]], baseline_test_nrmse=0.1,
+                            per_mass_mode_hz=lambda _, hz=hz: hz)
+        v = judge(c, d, 1.0)
+        assert v.right and v.parameter_error == pytest.approx(abs(1.1 * modes[0]["k3_per_mass"] / expected - 1))
 
 
 def _free_decay(law, fs=5000.0, f0=50.0, zeta=0.004, v0=0.3, duration_s=3.0, hit_s=0.1):

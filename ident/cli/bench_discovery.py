@@ -127,14 +127,30 @@ def judge(case: Case, d, seconds: float) -> Verdict:
     perr = gain = None
     if right and cause in COMPARED:
         found = findings[0].physical | findings[0].parameters
-        pairs = [(t, f) for t, f in COMPARED[cause] if case.truth.get(t) and f in found]
+        truth = _in_mode(case.truth, d.per_mass_mode_hz(findings[0]))
+        pairs = [(t, f) for t, f in COMPARED[cause] if truth.get(t) and f in found]
         if pairs:
             tkey, fkey = pairs[0]
-            perr = abs(found[fkey] / case.truth[tkey] - 1)
+            perr = abs(found[fkey] / truth[tkey] - 1)
         gain = findings[0].gain
     return Verdict(case.seed, case.family, cause, named, loc, right, extra, perr, gain, seconds, case.info,
                    [f"{f.label} gain {f.gain:.2f}" + ("" if any(f is g for g in findings) else " (clipped there: true)")
                     for f in d.findings], float(d.baseline_test_nrmse), strength=case.strength)
+
+
+MODE_MATCH = 0.15  # a finding's mode and the structure's mode it is compared in: within 15 % in frequency
+
+
+def _in_mode(truth: dict, mode_hz: float | None) -> dict:
+    """The truth in the structure's mode nearest ``mode_hz`` (the mode a finding's per-mass parameters are
+    per modal mass of), within ``MODE_MATCH``; else as given (the effect's beam's own first mode)."""
+    modes = truth.get("by_mode") or []
+    if not (modes and mode_hz and mode_hz > 0):
+        return truth
+    near = min(modes, key=lambda m: abs(m["frequency_hz"] - mode_hz))
+    if abs(near["frequency_hz"] / mode_hz - 1) > MODE_MATCH:
+        return truth
+    return truth | {k: v for k, v in near.items() if k != "frequency_hz"}
 
 
 def run_case(args: tuple[str, int, float, bool, bool, str | None]) -> Verdict:
@@ -184,6 +200,21 @@ def _joint_truth(eq: dict, effect: dict) -> dict:
     return truth
 
 
+def _equivalent_truth(cause: str, eq: dict, effect: dict) -> dict:
+    """The generator's one-mode equivalents (``eq``) in this catalogue's names."""
+    if cause == "contact":
+        return {"gap": eq.get("gap_m"), "side": eq.get("side"), "stiffness_per_mass": eq.get("contact_stiffness_per_mass")}
+    if cause == "cubic_stiffness":
+        return {"coefficient_per_mass": eq.get("k3_per_mass")}
+    if cause == "coulomb_friction":
+        return {"force_per_mass": eq.get("slip_force_per_mass")}
+    if cause == "quadratic_damping":
+        return {"coefficient_per_mass": eq.get("coefficient_per_mass")}
+    if cause == "hysteretic_joint" and "slipping_stiffness_per_mass" in eq:
+        return _joint_truth(eq, effect)
+    return {}
+
+
 def independent_case(seed: int, generated=None, twin: bool = False, family: str | None = None) -> Case:
     """The generator's case ``seed`` as a measurement and its truth (``generated``: that case, if already
     drawn; ``twin``: the case run without its effect, cause "none"; ``family``: that family's case, else
@@ -193,19 +224,12 @@ def independent_case(seed: int, generated=None, twin: bool = False, family: str 
     col, kind = t["excitation"].split(":")
     responses = tuple(Channel(n, k, np.asarray(c.columns[n], float)) for n, k in (r.split(":") for r in t["responses"]))
     m = Measurement(float(c.fs_hz), Channel(col, kind, np.asarray(c.columns[col], float)), responses)
-    eq = t.get("equivalent", {})
     cause = SYNONYMS.get(t["cause"], t["cause"])
-    truth = {}
-    if cause == "contact":
-        truth = {"gap": eq.get("gap_m"), "side": eq.get("side"), "stiffness_per_mass": eq.get("contact_stiffness_per_mass")}
-    elif cause == "cubic_stiffness":
-        truth = {"coefficient_per_mass": eq.get("k3_per_mass")}
-    elif cause == "coulomb_friction":
-        truth = {"force_per_mass": eq.get("slip_force_per_mass")}
-    elif cause == "quadratic_damping":
-        truth = {"coefficient_per_mass": eq.get("coefficient_per_mass")}
-    elif cause == "hysteretic_joint" and "slipping_stiffness_per_mass" in eq:
-        truth = _joint_truth(eq, t.get("effect", {}))
+    truth = _equivalent_truth(cause, t.get("equivalent", {}), t.get("effect", {}))
+    if len(t.get("equivalent_modes") or []) > 1:
+        # the same per mode of the structure: a finding's per-mass parameters are one mode's (``judge``)
+        truth["by_mode"] = [{"frequency_hz": e["natural_frequency_hz"], **_equivalent_truth(cause, e, t.get("effect", {}))}
+                            for e in t["equivalent_modes"]]
     if "-" in (t.get("location") or "") and kind == "force":
         # the generator's one-mode equivalent of a chain's element is taken at one mass of the pair, not
         # at their difference (seed 14: 1/511 of the cubic it put there); the element's own value is the

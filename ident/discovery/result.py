@@ -51,6 +51,15 @@ class Discovery:
         """1 - NRMSE of the extended model: predicting zero scores 0, a model worse than zero below it."""
         return 1.0 - self.extended_test_nrmse
 
+    def per_mass_mode_hz(self, c: Candidate) -> float | None:
+        """The natural frequency of the mode a candidate's per-mass parameters are per modal mass of (its
+        own linear part's, else the baseline's dominant mode at its location); None for a baseline in
+        physical units (a rig model: per the tip's mass). Where two modes share a location (two coupled
+        beams of close frequency), a per-mass coefficient means nothing without it."""
+        base = c.baseline or self.baseline
+        loc = {x.name: x for x in base.locations(self.prep)}.get(c.location)
+        return None if loc is None else base.per_mass_mode_hz(loc)
+
     def verdict(self) -> str:
         """One line: what was found, or that nothing was, or which causes the data cannot separate."""
         if not self.findings:
@@ -116,7 +125,8 @@ def to_json(d: Discovery) -> dict:
         "extended": {"test_nrmse": d.extended_test_nrmse, "equations": [equation(c) for c in d.findings]},
         "gain": d.gain,
         "gain_vs_zero": d.gain_vs_zero,
-        "findings": [{**candidate_json(c), "ambiguous_with": [candidate_json(a) for a in alike]}
+        "findings": [{**candidate_json(c), "per_mass_mode_hz": d.per_mass_mode_hz(c),
+                      "ambiguous_with": [candidate_json(a) for a in alike]}
                      for c, alike in zip(d.findings, d.ambiguous)],
         "candidates": [candidate_json(c) for c in d.candidates],
         "split": {"blocks": [[s.start, s.stop] for s in d.split.blocks],

@@ -465,6 +465,7 @@ def _truth(draft: Draft, cause: str, params: dict, generic: dict, r: Run, stats:
     truth["equivalent"] = {"sensor": site.location or draft.channels[1][0],
                            **draws.equivalents(site.phi_sensor, site.phi_effect, site.omega, site.zeta, eq_cause,
                                                generic)}
+    truth["equivalent_modes"] = _modal_equivalents(draft, eq_cause, generic)
     resp = r.response
     if cause == "cubic_stiffness" and draft.family == "cc_beam":
         k3pm = _membrane_k3_per_mass(draft)
@@ -485,6 +486,25 @@ def _truth(draft: Draft, cause: str, params: dict, generic: dict, r: Run, stats:
     else:
         truth["effect_strength"] = 0.0
     return truth
+
+
+def _modal_equivalents(draft: Draft, cause: str, generic: dict) -> list[dict]:
+    """The one-mode equivalents at the sensor in each mode of the structure below twice the site's first
+    mode (``draws.equivalents`` with the structure's mass-normalised shapes, not the effect's beam alone).
+    ``equivalent`` takes the beam's own first mode; two coupled beams of close frequency share it between
+    two modes, and a coefficient per modal mass is then one mode's or the other's (independent seed 6: a
+    cubic at tip 2 is 6.0e7 per kg in the beam's own mode, 2.7e7 and 3.2e7 in the rig's 8.89 and 9.46 Hz
+    modes)."""
+    model, site = draft.setup.model, draft.site
+    out = []
+    for j in np.flatnonzero(model.omega_rad_s < 2.0 * site.omega):
+        mode = model.shapes[:, j]
+        phi_s, phi_e = float(site.sensor @ mode), float(site.coordinate @ mode)
+        if abs(phi_s) < 1e-12 * np.abs(mode).max():
+            continue  # the sensor does not move in it
+        w = float(model.omega_rad_s[j])
+        out.append(draws.equivalents(phi_s, phi_e, w, float(model.damping[j, j]) / (2 * w), cause, generic))
+    return out
 
 
 @seeded

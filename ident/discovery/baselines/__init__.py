@@ -101,6 +101,11 @@ class Baseline:
         """The coordinate's modal mass [kg] when the model has physical units, else None."""
         return None
 
+    def per_mass_mode_hz(self, loc: Location) -> float | None:
+        """The natural frequency of the mode whose modal mass ``per_mass`` divides by, where it is one
+        mode's (a modal model: the location's dominant mode), else None."""
+        return None
+
     def basis_signs(self, loc: Location, gains: list[np.ndarray]) -> np.ndarray | None:
         """Per gain of ``gain_basis``, the sign its coefficient takes when a force at the location acts
         on that gain's mode with a positive modal mass; None where the coefficients need not agree (a

@@ -549,6 +549,10 @@ class ModalBaseline(Baseline):
         # gain_r = x kappa_r theta  ->  per mass = theta kappa_r x^2 = gain_r x
         return float(np.real(gain[r] * x))
 
+    def per_mass_mode_hz(self, loc: Location) -> float | None:
+        r = dominant_mode(self.coordinate_modes(loc), self.model.poles)
+        return float(self.model.frequencies_hz[r])
+
     def basis_signs(self, loc: Location, gains: list[np.ndarray]) -> np.ndarray | None:
         """A force at one place enters every mode through that mode's mass, which is positive: per gain
         of the basis (each is one mode's) the sign of what ``per_mass`` reads for a unit coefficient,
