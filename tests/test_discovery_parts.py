@@ -16,7 +16,7 @@ from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import CLEAR, free_decay
-from ident.discovery.discover import _softening_look_alike, _warm, noise_floor, sum_notes
+from ident.discovery.discover import _settle_by_backbone, _softening_look_alike, _warm, noise_floor, sum_notes
 from ident.discovery.baselines.modal import (Columns, ModalBaseline, _design, drivable, fit_model, peak_poles,
                                              underlying_poles)
 from ident.discovery.baselines.rig import RigBaseline
@@ -733,6 +733,32 @@ def test_a_stoppers_decay_is_told_from_a_cubics_by_its_backbones_shape():
     # a softening law's shape cannot follow a hardening glide: no better than no glide at all
     softening = bb.shape_error(describing_stiffness("cubic_stiffness", {"coefficient_per_mass": -1.0}, a))
     assert softening == pytest.approx(float(np.std(bb.frequency_hz)))
+
+
+def test_the_backbone_sets_aside_only_what_it_judged():
+    # a cubic's hammer decay at x (and the same at y): a stopper named first at x is set aside for the
+    # cubic at x; the stopper's look-alike at y, where this backbone was not read, stays
+    w0 = 2 * np.pi * 50
+    k3 = 0.06 * 8 / 3 * w0**2 / (0.3 / w0) ** 2
+    y, u, fs = _free_decay(lambda z: k3 * z**3, duration_s=4.0)
+    m = Measurement(fs, Channel("hammer", "force", u), (Channel("x", "displacement", y),
+                                                       Channel("y", "displacement", 0.5 * y)))
+    prep = prepare(m)
+    assert prep.transient
+    blocks = np.zeros(8)
+
+    def cand(cause, where, gain, **parameters):
+        return Candidate(cause, where, parameters, gain=gain, test_nrmse=1.0 - gain, p_value=1e-6,
+                         block_errors=blocks, own_gain=gain)
+
+    stopper = dict(stiffness_per_mass=w0**2, gap=0.3 / w0 / 2, side="both")
+    first = cand("contact", "x", 0.9, **stopper)
+    cubic = cand("cubic_stiffness", "x", 0.8, coefficient_per_mass=k3)
+    there = cand("contact", "y", 0.85, **stopper)
+    char = {}
+    kept, alike, why = _settle_by_backbone(first, [there], [first, cubic, there], prep, char, Settings())
+    assert kept is cubic and alike == [there], why
+    assert "contact set aside" in why and "backbone" in char["x"]
 
 
 def test_a_joints_truth_is_the_stiffness_it_loses_when_every_element_slips():

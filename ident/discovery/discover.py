@@ -530,7 +530,8 @@ def _settle_by_backbone(first: Candidate, alike: list[Candidate], scored: list[C
     out = {cause for cause, e in errs.items() if e >= CLEAR * max(best, 1e-12)}
     if not out:
         return first, alike, ""
-    kept = [c for c in [first] + alike if c.cause not in out or not stiff(c)]
+    # a look-alike at another response was not judged by this backbone: it stays
+    kept = [c for c in [first] + alike if not (c.location == first.location and c.cause in out)]
     if first.cause in out:
         fitting = [c for c in here if c.cause not in out]
         first = max(fitting, key=lambda c: c.gain)
