@@ -30,7 +30,7 @@ SETTLE_S = 0.02  # after a hit: the hammer's contact and the band-pass's own rin
 FLOOR = 0.1  # the decay is followed down to this share of its starting amplitude
 SMOOTH_PERIODS = 10
 MIN_POINTS = 4
-CLEAR = 3.0  # one power's line must fit this many times better than the other's to separate them
+CLEAR = 3.0  # a stiffness law whose shape fits this many times worse than the best law's is set aside
 
 
 @dataclass(frozen=True)
@@ -51,14 +51,6 @@ class Backbone:
         coef = np.linalg.lstsq(X, self.frequency_hz, rcond=None)[0]
         rms = float(np.sqrt(np.mean((self.frequency_hz - X @ coef) ** 2)))
         return float(coef[0]), float(coef[1]), rms
-
-    def follows(self, powers: set[float]) -> float | None:
-        """The one power among ``powers`` whose line fits ``CLEAR`` times better than every other's,
-        else None (the backbone cannot tell them apart)."""
-        errs = sorted((self.line(p)[2], p) for p in powers)
-        if len(errs) < 2 or errs[1][0] < CLEAR * max(errs[0][0], 1e-12):
-            return None
-        return errs[0][1]
 
     def shape_error(self, stiffness: np.ndarray) -> float:
         """RMS error (Hz) of the best line of frequency against a law's describing stiffness at each point's

@@ -501,8 +501,7 @@ def _settle_by_backbone(first: Candidate, alike: list[Candidate], scored: list[C
     if not prep.transient or first.location not in prep.names:
         return first, alike, ""
     probe = np.ones(1)
-    stiff = lambda c: CAUSES[c.cause].kind == "mechanical" and describing_stiffness(  # noqa: E731
-        c.cause, c.parameters, probe) is not None
+    stiff = lambda c: describing_stiffness(c.cause, c.parameters, probe) is not None  # noqa: E731
     here, seen = [], set()
     for c in [first] + alike + [c for c in scored if significant(c, settings)]:
         if c.location == first.location and id(c) not in seen and stiff(c):
