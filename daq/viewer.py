@@ -58,6 +58,8 @@ from urllib.parse import quote
 import numpy as np
 from scipy import signal as sg
 
+from ident.live.regimes import starting
+
 from .safeio import PartFile
 
 CHANNELS = ("base", "tip1", "tip2")
@@ -415,11 +417,14 @@ class RerunViewer:
         for c in out.changes:
             self.rec.set_time("time", duration=c.t_s)
             self.rec.log("regime", rr.StateChange(state=c.regime))
-        if out.windows and not self._regime_started:
+        first = starting(out.windows) if not self._regime_started else None
+        if first is not None:
             self._regime_started = True
-            self.rec.set_time("time", duration=out.windows[0].t_s)
-            self.rec.log("regime", rr.StateChange(state=out.windows[0].label))
+            self.rec.set_time("time", duration=first.t_s)
+            self.rec.log("regime", rr.StateChange(state=first.label))
         for w in out.windows:
+            if w.provisional:  # before the starting regime is decided, no beam has a state to show
+                continue
             for i, b in enumerate(w.beams):
                 state = "hitting" if b.hitting else "free"
                 if state != self._beam_state[i]:

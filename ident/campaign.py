@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .library import PolynomialForcingLibrary
-from .live.regimes import RegimeConfig, RegimeMonitor, SlowDrive, SlowDriveWatch
+from .live.regimes import RegimeConfig, RegimeMonitor, SlowDrive, SlowDriveWatch, starting
 from .live.rolling import RollingConfig, ident_rate, window_coordinates
 from .model import SindyModel
 from .sindy import refine, sweep
@@ -70,7 +70,8 @@ def regime_record(values: np.ndarray, fs_hz: float, window_s: float = RegimeConf
     starts the next at the change's time, the last ends at the end of the data.
 
     The monitor reports a window's regime at the window's end (windows of window_s, 0.5 s by default, every
-    0.25 s, a new regime after two windows); before its first window the regime is that window's. A window
+    0.25 s, a new regime after two windows); the starting regime, decided at the third window, holds from the
+    start of the data. A window
     must hold ``MIN_PERIODS`` periods of the drive (3.6: 0.5 s down to 7.2 Hz; see ``ident.live.regimes``);
     where the drive held fewer for 2 s running, ``slow_drive`` says when and which window would do.
     """
@@ -79,7 +80,8 @@ def regime_record(values: np.ndarray, fs_hz: float, window_s: float = RegimeConf
     windows, changes = RegimeMonitor(RegimeConfig(fs_hz=fs_hz, window_s=window_s)).step(x)
     if not windows:
         raise ValueError(f"{duration:.2f} s is shorter than one regime window; nothing to report")
-    spans, start, label = [], 0.0, windows[0].label
+    first = starting(windows) or windows[-1]  # a stream too short to decide the start: its last guess
+    spans, start, label = [], 0.0, first.label
     for c in changes:
         spans.append(RegimeSpan(label, start, c.t_s))
         start, label = c.t_s, c.regime

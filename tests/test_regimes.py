@@ -11,9 +11,9 @@ from daq.sim.rig import RigConfig, simulate_rig
 from daq.sim.sensors import to_counts
 from ident.live.pipeline import Pipeline, PipelineConfig
 from ident.live.regimes import (CROSS_BAND, CROSS_MARGIN, CROSS_MIN_WINDOWS, CROSS_QUANTILE, LABELS, MIN_PERIODS,
-                                PHASE_REFERENCE, PHASE_Z, SLOW_WINDOWS, Decision, RegimeConfig, RegimeMonitor, _cross_talk,
+                                PHASE_REFERENCE, PHASE_WINDOWS, PHASE_Z, SLOW_WINDOWS, Decision, RegimeConfig, RegimeMonitor, _cross_talk,
                                 _clipping, _gap_evidence, _half_phasors, _in_phase, _leakage, _own_contact, decide,
-                                label_of, regime_start, regime_step, spectral_features)
+                                label_of, regime_start, regime_step, spectral_features, starting)
 from ident.live.scoring import score_regimes, true_changes
 
 FS = 2000.0
@@ -193,7 +193,7 @@ def test_no_false_change_on_a_steady_minute():
     assert case.truth["regime_share"]["beam2"] > 0.99
     sc, windows = scored(case)
     assert sc.reported_changes == 0
-    assert sc.share_right == 1.0 and windows[0].label == "localized-2"  # the starting regime too
+    assert sc.share_right == 1.0 and starting(windows).label == "localized-2"  # the starting regime too
 
 
 def test_any_split_into_blocks_gives_the_same_output(generated):
@@ -215,25 +215,27 @@ def test_any_split_into_blocks_gives_the_same_output(generated):
 
 def decided(probabilities, cfg=RegimeConfig()):
     """The decision stage alone on a synthetic sequence of the beams' probabilities of hitting: every
-    window's reported label and the indices of the windows that report a change."""
+    window's reported label (None before the starting regime is decided) and the indices of the windows
+    that report a change."""
     d, labels, changes = Decision(), [], []
     for k, p in enumerate(probabilities):
         d, changed = decide(d, p, cfg)
-        labels.append(d.label)
+        labels.append(d.label if d.started else None)
         if changed:
             changes.append(k)
     return labels, changes
 
 
 FREE, HIT, GRAZE = 0.1, 0.9, 0.6  # clear free, clear hitting, inside the hysteresis band [0.3, 0.7]
+S = PHASE_WINDOWS - 1  # windows before the starting regime is decided
 
 
 @pytest.mark.parametrize("dwell", [1, 2, 3, 5])
 def test_a_sustained_change_is_reported_after_exactly_the_dwell(dwell):
     cfg = RegimeConfig(dwell=dwell)
     labels, changes = decided([(FREE, FREE)] * 10 + [(HIT, FREE)] * 10, cfg)
-    assert labels[0] == "linear" and changes == [10 + dwell - 1]
-    assert labels[:10 + dwell - 1] == ["linear"] * (10 + dwell - 1)
+    assert labels[:S] == [None] * S and labels[S] == "linear" and changes == [10 + dwell - 1]
+    assert labels[S:10 + dwell - 1] == ["linear"] * (10 + dwell - 1 - S)
     assert labels[10 + dwell - 1:] == ["localized-1"] * (10 - dwell + 1)
 
 
@@ -242,23 +244,35 @@ def test_flicker_shorter_than_the_dwell_is_no_change():
     # clear flicker: the other regime for 1 and 2 windows at a time (< 3), ten times over
     seq = [(FREE, FREE)] * 4 + ([(HIT, FREE)] + [(FREE, FREE)] * 2 + [(FREE, HIT)] * 2 + [(FREE, FREE)]) * 10
     labels, changes = decided(seq, cfg)
-    assert changes == [] and set(labels) == {"linear"}
-    # the starting regime is the first window's, whatever it is
-    labels, changes = decided([(HIT, HIT)] + [(HIT, FREE), (HIT, HIT)] * 5, RegimeConfig(dwell=2))
-    assert changes == [] and set(labels) == {"impacting-both"}
+    assert changes == [] and set(labels[S:]) == {"linear"}
+    # the starting regime is the PHASE_WINDOWS-th window's, whatever the windows before it guessed
+    labels, changes = decided([(FREE, FREE), (HIT, FREE), (HIT, HIT)] + [(HIT, FREE), (HIT, HIT)] * 5,
+                              RegimeConfig(dwell=2))
+    assert changes == [] and set(labels[S:]) == {"impacting-both"}
+
+
+def test_the_start_waits_for_the_windows_the_phase_rules_sum():
+    """Independent regime seed 6015, held in "both": beam 2's p rose 0.27, 0.62, 0.97 over the first three
+    windows (its harmonics taken for the coupling's before the coupling was measured, the phase rules not
+    yet summed). Decided at the first window, the stream started "beam 1 hitting" and reported "both" at
+    the fourth: a false change. Decided at the third, it starts "both"; the windows before say nothing."""
+    seq = [(HIT, 0.27), (HIT, 0.62), (HIT, 0.97)] + [(HIT, HIT)] * 10
+    labels, changes = decided(seq, RegimeConfig(dwell=2))
+    assert S == 2 and labels[:S] == [None, None]
+    assert changes == [] and set(labels[S:]) == {"impacting-both"}
 
 
 def test_the_starting_regime_is_each_beams_likelier_state_and_then_held_by_the_hysteresis():
-    """A beam at p = 0.6 in the first window starts hitting (the likelier state; the hysteresis has no
+    """A beam at p = 0.6 in the window that decides the start starts hitting (the likelier state; the hysteresis has no
     state yet to hold) and is held there while p stays above 0.5 - h; the same p after a free start does
     not make it hitting."""
     cfg = RegimeConfig(dwell=2, hysteresis=0.2)
-    labels, changes = decided([(GRAZE, HIT)] + [(0.45, HIT), (GRAZE, HIT)] * 10, cfg)
-    assert changes == [] and set(labels) == {"impacting-both"}
-    labels, changes = decided([(0.45, HIT)] + [(GRAZE, HIT)] * 10, cfg)
-    assert changes == [] and set(labels) == {"localized-2"}
-    labels, changes = decided([(0.5, 0.51)], cfg)  # at exactly 0.5 a beam is not the likelier hitting
-    assert labels == ["localized-2"]
+    labels, changes = decided([(GRAZE, HIT)] + [(0.45, HIT), (GRAZE, HIT)] * 10, cfg)  # the third window: GRAZE
+    assert changes == [] and set(labels[S:]) == {"impacting-both"}
+    labels, changes = decided([(0.45, HIT)] * (S + 1) + [(GRAZE, HIT)] * 10, cfg)
+    assert changes == [] and set(labels[S:]) == {"localized-2"}
+    labels, changes = decided([(0.5, 0.51)] * (S + 1), cfg)  # at exactly 0.5 a beam is not the likelier hitting
+    assert labels[S:] == ["localized-2"]
 
 
 def test_windows_inside_the_hysteresis_band_neither_count_nor_break_the_dwell():
@@ -268,7 +282,7 @@ def test_windows_inside_the_hysteresis_band_neither_count_nor_break_the_dwell():
     # leaves: the label impacting-both for 6 windows, but only 1 clear one: no change (the plain two-window
     # dwell reported it, and its return, as two changes)
     labels, changes = decided(start + [(HIT, 0.75)] + [(HIT, GRAZE)] * 5 + [(HIT, FREE)] * 4, cfg)
-    assert changes == [] and set(labels) == {"localized-1"}
+    assert changes == [] and set(labels[S:]) == {"localized-1"}
     # unclear windows in between do not break the run: the second clear window reports the change
     labels, changes = decided(start + [(HIT, 0.75)] + [(HIT, GRAZE)] * 3 + [(HIT, HIT)] * 3, cfg)
     assert changes == [4 + 4] and labels[8] == "impacting-both"
@@ -425,7 +439,7 @@ def test_a_grazing_beam_is_told_from_the_coupling_by_the_phase_of_its_third_harm
     # in phase: the carried -sqrt(c) and the own 3 sqrt(c) make (3 - 1)^2 c = 4 c of tip 2's harmonic power
     contact = two_tips(10.0, own1=0.0, c=c, own=9.0, own_deg=0.0)
     windows, _ = run_monitor(contact)
-    assert windows[0].label == "impacting-both"  # the starting regime
+    assert starting(windows).label == "impacting-both"  # the starting regime
     assert all(w.label == "impacting-both" and w.beams[0].cross_talk == 0.0 for w in windows)
     assert all(w.beams[0].distortion == pytest.approx(4 * c * 0.1, rel=0.01) for w in windows)
 

@@ -12,6 +12,7 @@ import pytest
 
 from clitools import run_main
 from daq.viewer import ENTITIES
+from ident.live.regimes import PHASE_WINDOWS
 from replay.cli import main as replay_main
 from replay.play import play
 from replay.formats.mcap import read_recording
@@ -236,10 +237,12 @@ def test_record_no_identify_still_monitors_regimes(tmp_path):
     assert rec.models == [] and not any(e["kind"] == "model" for e in rec.events)
     lines = [json.loads(x) for x in ev.read_text().splitlines()]
     assert [e["regime"] for e in lines if e["kind"] == "regime"] == ["localized-2"]
-    # the regime the stream starts in (free: the kick comes at 3 s), once, at the first window
+    # the regime the stream starts in (free: the kick comes at 3 s), once, at the window that decides it: the
+    # PHASE_WINDOWS-th (window 0.5 s, hop 0.25 s), the windows before it provisional
     for events in (rec.events, lines):
         start = [e for e in events if e["kind"] == "regime_start"]
         assert [e["regime"] for e in start] == ["linear"]
+        assert start[0]["t"] == pytest.approx(0.5 + (PHASE_WINDOWS - 1) * 0.25)
         assert 0.0 < start[0]["confidence"] <= 1.0
     assert {"start", "stop"} <= {e["kind"] for e in lines}  # the acquisition's events as before
     assert "1 regime changes" in p.stdout and "no identification" in p.stdout, p.stdout

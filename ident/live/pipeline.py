@@ -6,7 +6,7 @@ returns what the sinks need: the causal 50 Hz low-pass of every channel (the
 raw block is kept beside it, since impacts live above 50 Hz), relative
 motions (tip minus base, filtered), the regime monitor's windows and changes,
 the rolling identification's fits, and the events (``kind`` "regime_start"
-once, at the first window: the regime the stream starts in, with its
+once, at the window that decides it, the third (``regimes.decide``): the regime the stream starts in, with its
 confidence; then "regime" at each change and "model"; "regime_note" once,
 with a message, when the drive has stayed too slow for the regime monitor's
 window for 2 s: see ``ident.live.regimes.MIN_PERIODS``). Times are seconds
@@ -25,7 +25,8 @@ from ..library import PolynomialForcingLibrary
 from ..physical import KERNELS as PHYSICAL_KERNELS
 from ..simulate import KERNELS as INTEGRATION_KERNELS, PARALLEL_MIN_WORK, kernels_cached as _cached, simulate
 from ..sindy import KERNELS as SINDY_KERNELS, integration_errors
-from .regimes import KERNELS as REGIME_KERNELS, RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow, SlowDriveWatch
+from .regimes import (KERNELS as REGIME_KERNELS, RegimeChange, RegimeConfig, RegimeMonitor, RegimeWindow, SlowDriveWatch,
+                      starting)
 from .rolling import RollingConfig, RollingIdentifier, WindowFit, window_coordinates
 
 
@@ -174,9 +175,9 @@ class Pipeline:
 
     def _output(self, t, x, y, rel, windows, changes, fits) -> StepOutput:
         events = []
-        if windows and not self._started:
+        w = starting(windows) if not self._started else None
+        if w is not None:
             self._started = True
-            w = windows[0]
             events.append({"t": w.t_s, "kind": "regime_start", "regime": w.label,
                            "confidence": w.confidence})
         slow = self._slow.update(windows)

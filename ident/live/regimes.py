@@ -85,8 +85,8 @@ beam's probability of hitting is the logistic, its confidence max(p, 1 - p). The
 (``decide``) adds hysteresis and a dwell: a beam switches to hitting above p = 0.5 + ``hysteresis``
 and back at or below 0.5 - ``hysteresis``, and a new regime is reported once it has been the
 window's label in ``dwell`` clear windows (the p of every beam that changes outside that band) without another label
-in between, or in ``max_dwell`` windows of any kind; the first window reports the starting regime, each
-beam in its likelier state (p > 0.5).
+in between, or in ``max_dwell`` windows of any kind; the starting regime, each beam in its likelier state
+(p > 0.5), is reported at the ``PHASE_WINDOWS``-th window (the windows before it are provisional).
 The thresholds were set on generated rigs (seeds 0-30 of daq.sim.independent) other than those
 ``daq bench --regimes`` reports (seeds from 1000).
 
@@ -228,6 +228,7 @@ class RegimeWindow:
     beams: tuple[BeamState, BeamState]
     amplitude_ratio: float  # displacement amplitude tip1 / tip2 (localisation)
     periods: float = float("nan")  # the drive's periods in the window (below MIN_PERIODS the harmonics are leakage)
+    provisional: bool = False  # before the starting regime is decided (``decide``): the label is this window's guess
 
     @property
     def impact_rms(self) -> tuple[float, float]:
@@ -324,8 +325,15 @@ def decide(prev: Decision, p: tuple[float, float], cfg: RegimeConfig) -> tuple[D
       in through the band is not reported, a change that the data shows clearly is reported at exactly
       its ``dwell``-th window (with the defaults the second, 0.25 s after the first, as before), and a
       regime that stays unclear is still reported at its ``max_dwell``-th window (1.75 s after the first).
-    - The first window reports the starting regime (no change): each beam's likelier state, p > 0.5.
-      Hysteresis holds a state against evidence inside its band; at the start there is none to hold.
+    - The starting regime (no change) is each beam's likelier state, p > 0.5, decided at the
+      ``PHASE_WINDOWS``-th window: the phase rules sum that many windows, and the start must not rest on
+      less evidence than any later decision. The windows before it carry their own likelier states as a
+      provisional label (``RegimeWindow.provisional``) and report nothing. Independent regime seed 6015,
+      held in "both" for 10 minutes: beam 2's first window at p = 0.27 (its harmonics taken for the
+      coupling's before the stream had measured the coupling, the phase rules not yet summed), so the
+      stream started "beam 1 hitting" and reported "both" 0.75 s later, a false change; at the third
+      window both beams stand at p = 0.97. Hysteresis holds a state against evidence inside its band; at
+      the start there is none to hold.
       Independent regime seed 6023, held in "both" for 10 minutes with the gaps learned: beam 1 at
       p = 0.49-0.62 throughout, so the free start the hysteresis gave (p > 0.7 to call it hitting) was
       never left: 0 % of the windows right, 100 % with this rule (``daq bench --regimes``, stop 46).
@@ -349,8 +357,9 @@ def decide(prev: Decision, p: tuple[float, float], cfg: RegimeConfig) -> tuple[D
     was = _hits_of(prev.label)
     moving = [i for i in range(2) if hit[i] != was[i]] or [0, 1]
     clear = all(p[i] > 0.5 + h or p[i] <= 0.5 - h for i in moving)
-    if not prev.started:
-        return Decision(hit, raw, raw, 1, int(clear), True), False
+    if not prev.started:  # ``held`` counts the windows seen; the start is decided at the PHASE_WINDOWS-th
+        seen = prev.held + 1
+        return Decision(hit, raw, raw, 1 if seen >= PHASE_WINDOWS else seen, int(clear), seen >= PHASE_WINDOWS), False
     held, n_clear = (prev.held + 1, prev.clear + int(clear)) if raw == prev.candidate else (1, int(clear))
     changed = raw != prev.label and (n_clear >= cfg.dwell or held >= cfg.max_dwell)
     return Decision(hit, raw if changed else prev.label, raw, held, n_clear, True), changed
@@ -424,6 +433,11 @@ def regime_step(state: RegimeState, block: np.ndarray) -> tuple[RegimeState, lis
                 changes.append(ch)
     state = replace(state, buf=buf, since_hop=since, n_seen=n_seen)
     return state, windows, changes
+
+
+def starting(windows: list[RegimeWindow]) -> RegimeWindow | None:
+    """The window that decides the starting regime (the first not provisional), if these windows hold it."""
+    return next((w for w in windows if not w.provisional), None)
 
 
 class RegimeMonitor:
@@ -871,7 +885,7 @@ def _window(state: RegimeState, sp: _Spectral, t_end: float) -> tuple[RegimeStat
         change = RegimeChange(t_end, decision.label, state.decision.label, beams[0].confidence * beams[1].confidence)
     ratio = zs[0] / zs[1] if zs[1] > 0 else float("inf")
     window = RegimeWindow(t_end, decision.label, decision.candidate, f, (beams[0], beams[1]), ratio,
-                          f * cfg.window_s)
+                          f * cfg.window_s, not decision.started)
     state = replace(state, power_flow=flow, floors=floors, free_z=tuple(free_z), hit_z=tuple(hit_z),
                     free_w=tuple(free_w), cross=tuple(cross), decision=decision,
                     in_phase=(in_phase[0], in_phase[1]), clipping=(clipping[0], clipping[1]))
