@@ -424,7 +424,7 @@ def test_a_grazing_beam_beside_a_hitting_one_is_found_once_the_coupling_is_measu
 
 
 def test_a_grazing_beam_is_told_from_the_coupling_by_the_phase_of_its_third_harmonic():
-    """From the first window, nothing measured: tip 1's harmonics in phase with tip 2's are its own contact
+    """From the start, nothing measured: tip 1's harmonics in phase with tip 2's are its own contact
     (none removed as the coupling's: its distortion is all of its 1.6 % of tip 2's harmonic power, 1.6e-3 of
     its fundamental's, within the bound of 5 % that would otherwise hide it) and beam 1 is called hitting;
     harmonics in anti-phase (0.4 %) are what the coupling carries into a free beam, and the bound removes
@@ -440,8 +440,11 @@ def test_a_grazing_beam_is_told_from_the_coupling_by_the_phase_of_its_third_harm
     contact = two_tips(10.0, own1=0.0, c=c, own=9.0, own_deg=0.0)
     windows, _ = run_monitor(contact)
     assert starting(windows).label == "impacting-both"  # the starting regime
-    assert all(w.label == "impacting-both" and w.beams[0].cross_talk == 0.0 for w in windows)
-    assert all(w.beams[0].distortion == pytest.approx(4 * c * 0.1, rel=0.01) for w in windows)
+    # (a single window's phase counts for at most PHASE_Z deviations: the rule needs two, so the first
+    # window, provisional, still has the bound removed)
+    decided = [w for w in windows if not w.provisional]
+    assert all(w.label == "impacting-both" and w.beams[0].cross_talk == 0.0 for w in decided)
+    assert all(w.beams[0].distortion == pytest.approx(4 * c * 0.1, rel=0.01) for w in decided)
 
 
 def test_the_in_phase_component_and_its_noise():
@@ -459,6 +462,20 @@ def test_the_in_phase_component_and_its_noise():
     assert PHASE_Z * np.sqrt(0.02) < 2.0 and _own_contact(((1.0, 0.01), (1.0, 0.01)))  # 2 against 4 x 0.14
     assert not _own_contact(((0.1, 0.01), (0.1, 0.01), (0.1, 0.01)))
     assert not _own_contact(((0.0, 0.0),))
+
+
+def test_one_windows_burst_alone_is_no_own_contact():
+    """Each window counts for at most PHASE_Z deviations, so three windows (PHASE_Z sqrt(3) = 6.9 needed)
+    need evidence in two of them. Independent regime seed 6008 at the onset of beam 1's contact: beam 2's
+    in-phase component at -0.2, 53.2 and 1.3 deviations in three windows, a sum of 54 that made it "hitting"
+    for three windows; capped 5.3."""
+    sd = 0.1
+    onset = tuple((z * sd, sd**2) for z in (-0.2, 53.2, 1.3))
+    assert sum(c for c, _ in onset) > PHASE_Z * np.sqrt(3 * sd**2)  # the plain sum would call it contact
+    assert not _own_contact(onset)
+    assert _own_contact(tuple((z * sd, sd**2) for z in (2.5, 2.5, 2.5)))  # a grazing beam: 7.5 deviations
+    assert _own_contact(tuple((z * sd, sd**2) for z in (40.0, 30.0, 0.0)))  # two windows of a contact: 8
+    assert not _own_contact(tuple((z * sd, sd**2) for z in (40.0, -1.5, 0.0)))  # one: 2.5
 
 
 @pytest.mark.parametrize("sides", ["both", "one"])
