@@ -306,7 +306,8 @@ class Decision:
     candidate: str = LABELS[0]  # this window's label (after hysteresis, before the dwell)
     held: int = 0  # consecutive windows the candidate has been the label, this one included
     clear: int = 0  # ... of them clear: every beam's probability outside the hysteresis band
-    started: bool = False
+    started: bool = False  # the starting regime is decided (at the PHASE_WINDOWS-th window)
+    seen: int = 0  # windows decided so far, counted until the start
 
 
 def decide(prev: Decision, p: tuple[float, float], cfg: RegimeConfig) -> tuple[Decision, bool]:
@@ -357,9 +358,9 @@ def decide(prev: Decision, p: tuple[float, float], cfg: RegimeConfig) -> tuple[D
     was = _hits_of(prev.label)
     moving = [i for i in range(2) if hit[i] != was[i]] or [0, 1]
     clear = all(p[i] > 0.5 + h or p[i] <= 0.5 - h for i in moving)
-    if not prev.started:  # ``held`` counts the windows seen; the start is decided at the PHASE_WINDOWS-th
-        seen = prev.held + 1
-        return Decision(hit, raw, raw, 1 if seen >= PHASE_WINDOWS else seen, int(clear), seen >= PHASE_WINDOWS), False
+    if not prev.started:
+        seen = prev.seen + 1
+        return Decision(hit, raw, raw, 1, int(clear), seen >= PHASE_WINDOWS, seen), False
     held, n_clear = (prev.held + 1, prev.clear + int(clear)) if raw == prev.candidate else (1, int(clear))
     changed = raw != prev.label and (n_clear >= cfg.dwell or held >= cfg.max_dwell)
     return Decision(hit, raw if changed else prev.label, raw, held, n_clear, True), changed
