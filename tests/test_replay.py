@@ -12,7 +12,7 @@ import pytest
 
 from clitools import run_main
 from daq.viewer import ENTITIES
-from ident.live.regimes import PHASE_WINDOWS
+from ident.live.regimes import PHASE_WINDOWS, RegimeConfig
 from replay.cli import main as replay_main
 from replay.play import play
 from replay.formats.mcap import read_recording
@@ -242,7 +242,7 @@ def test_record_no_identify_still_monitors_regimes(tmp_path):
     for events in (rec.events, lines):
         start = [e for e in events if e["kind"] == "regime_start"]
         assert [e["regime"] for e in start] == ["linear"]
-        assert start[0]["t"] == pytest.approx(0.5 + (PHASE_WINDOWS - 1) * 0.25)
+        assert start[0]["t"] == pytest.approx(RegimeConfig.window_s + (PHASE_WINDOWS - 1) * RegimeConfig.hop_s)
         assert 0.0 < start[0]["confidence"] <= 1.0
     assert {"start", "stop"} <= {e["kind"] for e in lines}  # the acquisition's events as before
     assert "1 regime changes" in p.stdout and "no identification" in p.stdout, p.stdout
