@@ -2,10 +2,12 @@
 generator's rigs (regimes against its per-sample truth); the streaming stage's block-split invariance."""
 
 from dataclasses import replace
+from types import SimpleNamespace as NS
 
 import numpy as np
 import pytest
 
+from daq.bench_regimes import CaseData, at_the_gap
 from daq.sim.excitation import Kick, Step
 from daq.sim.rig import RigConfig, simulate_rig
 from daq.sim.sensors import to_counts
@@ -330,6 +332,19 @@ def test_false_changes_are_split_by_whether_the_rig_held_the_regime():
     assert [(c.previous, c.code) for c in sc.true_changes] == [(0, 3)]
     assert sc.latencies_s == (pytest.approx(0.5),)
     assert (sc.false_changes, sc.false_never_held, sc.reported_changes) == (6, 3, 7)
+
+
+def test_the_wrong_beams_at_their_gap_are_counted_over_the_scored_windows_only():
+    """At 100 Hz, free for 3 s then both beams hitting: the true change at 3 s opens [2.99 s, 4.0 s), whose
+    windows are not scored. Windows every 0.5 s report free throughout, so from 4.0 s both beams are wrong in
+    each (4.0-6.5 s: 6 windows, 12 beam-windows); beam 1's peak lies at 1.02 gaps (at its gap), beam 2's at
+    1.2 (clearly beyond). The window at 3.5 s (inside the transition) is wrong too, and at its gap, but
+    not scored; the windows before are right."""
+    codes = np.array([0] * 300 + [3] * 400)
+    truth = {"stoppers": [{"gap_eq_m": 1e-3}, {"gap_eq_m": 2e-3}]}
+    beams = (NS(peak_displacement_m=1.02e-3), NS(peak_displacement_m=2.4e-3))
+    windows = [NS(t_s=t, label="linear", beams=beams) for t in np.arange(1, 14) * 0.5]
+    assert at_the_gap(CaseData(100.0, np.zeros((700, 3)), codes, truth), windows) == (12, 6)
 
 
 def test_bad_config_and_input():

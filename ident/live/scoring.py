@@ -74,6 +74,18 @@ def true_changes(codes: np.ndarray, fs_hz: float, min_run_s: float = 1.0) -> lis
     return out
 
 
+def scored_windows(window_t_s: np.ndarray, changes: list[TrueChange] | tuple[TrueChange, ...], n_truth: int,
+                   fs_hz: float, settle_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(which windows are scored, the truth sample at each window's end): every window but those ending in
+    [t_d, t_c + ``settle_s``) of a true change."""
+    t = np.asarray(window_t_s, float)
+    idx = np.clip(np.round(t * fs_hz).astype(int) - 1, 0, n_truth - 1)
+    keep = np.ones(len(t), bool)
+    for c in changes:
+        keep &= ~((t >= c.t_departure_s) & (t < c.t_s + settle_s))
+    return keep, idx
+
+
 def score_regimes(window_t_s: np.ndarray, window_codes: np.ndarray, changes: list[tuple[float, int]],
                   truth_codes: np.ndarray, fs_hz: float, min_run_s: float = 1.0,
                   settle_s: float = 1.0) -> RegimeScore:
@@ -83,10 +95,7 @@ def score_regimes(window_t_s: np.ndarray, window_codes: np.ndarray, changes: lis
     codes = np.asarray(window_codes, int)
     truth = np.asarray(truth_codes, int)
     tcs = true_changes(truth, fs_hz, min_run_s)
-    idx = np.clip(np.round(t * fs_hz).astype(int) - 1, 0, len(truth) - 1)
-    keep = np.ones(len(t), bool)
-    for c in tcs:
-        keep &= ~((t >= c.t_departure_s) & (t < c.t_s + settle_s))
+    keep, idx = scored_windows(t, tcs, len(truth), fs_hz, settle_s)
     right = int(np.sum(codes[keep] == truth[idx[keep]]))
     latencies = []
     for c in tcs:
