@@ -102,15 +102,18 @@ def _live(args, py, c_start, w_start) -> None:
 
         def speed(extra):
             out = subprocess.run(replay + extra, check=True, capture_output=True, text=True).stdout
-            m = re.search(r"\(([\d.]+) x real time; CPU [\d.]+ s, ([\d.]+) x\)", out)
+            m = re.search(r"\(([\d.]+) x real time; CPU [\d.]+ s, ([\d.]+) x[;)]", out)
             return float(m.group(1)), float(m.group(2))
 
-        with_id = np.array([speed([]) for _ in range(3)])
-        without = np.array([speed(["--no-identify"]) for _ in range(3)])
+        # interleaved, so that a load that comes and goes touches every variant alike
+        runs = [(speed([]), speed(["--one-process"]), speed(["--no-identify"])) for _ in range(3)]
+        with_id, one, without = (np.array([r[k] for r in runs]) for k in range(3))
+        where = "in a second process" if (os.cpu_count() or 1) >= 2 else "one core: in one process"
         print(f"replay --max : {np.median(with_id[:, 0]):6.0f} x real time with identification "
-              f"({np.median(with_id[:, 1]):.0f} x in CPU time), {np.median(without[:, 0]):6.0f} x without "
-              f"({np.median(without[:, 1]):.0f} x in CPU time); 60 s recording with a regime change, medians of 3; "
-              f"target 200 x")
+              f"({np.median(with_id[:, 1]):.0f} x in CPU time; {where}), "
+              f"{np.median(one[:, 0]):6.0f} x with it in one process ({np.median(one[:, 1]):.0f} x in CPU time), "
+              f"{np.median(without[:, 0]):6.0f} x without ({np.median(without[:, 1]):.0f} x in CPU time); 60 s "
+              f"recording with a regime change, medians of 3 interleaved; target 200 x")
         out = Path(tmp) / "live.mcap"
         c0, t0 = _child_cpu(), time.perf_counter()
         res = subprocess.run(py + ["record", "--sim", "--config", str(cfg), "--duration", "30", "-o", str(out),

@@ -14,6 +14,7 @@ replaces an existing output, never an input.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import time
@@ -28,11 +29,11 @@ from daq.recorder import TOPICS
 from daq.safeio import Output, check_outputs, part_path
 from daq.viewer import RerunViewer, resolve_mode
 from ident.cli import OFFSET, PLAY_RATE, RATE_HZ, DURATION, OneLineParser, run_guarded
-from ident.live.pipeline import model_records
+from ident.live.pipeline import model_records, rolling_config
 
 from . import formats
 from .formats.mcap import read_recording
-from .play import play
+from .play import RemoteIdentifier, play
 from .recover import recover
 
 VERBS = ("info", "export", "import", "recover", "play")
@@ -73,6 +74,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--rrd", type=Path, help="with --viewer save: the .rrd to write")
     pl.add_argument("--models", type=Path, help="write each window's model (per beam) as JSON lines here")
     pl.add_argument("--force", action="store_true", help="replace existing output files")
+    pl.add_argument("--one-process", action="store_true",
+                    help="with --max: run the rolling identification in this process too (default: in a second "
+                         "process beside the filters, the regime monitor and the outputs, where the machine has "
+                         "two cores)")
     _csv_options(pl)
     pl.set_defaults(func=play_cmd)
 
@@ -159,13 +164,21 @@ def play_cmd(args) -> int:
             elif e["kind"] == "regime_note":
                 print(f"{e['t']:9.2f} s  note: {e['message']}", flush=True)
 
+    # as fast as possible on two cores or more, the rolling identification works in a second process
+    remote = (RemoteIdentifier(rolling_config(samples.fs_hz, args.window, args.hop))
+              if args.max and not args.no_identify and not args.one_process and (os.cpu_count() or 1) >= 2 else None)
     try:
         compile_s = compile_kernels(identify=not args.no_identify)  # before the clock starts: no window waits
+        if remote is not None:
+            remote.ready()  # its kernels loaded (it started before ours compiled), before the clock too
         cpu0 = time.process_time()
         rep = play(samples, rate=None if args.max else args.rate, start_s=args.start, duration_s=args.duration,
                    loop=args.loop, identify=not args.no_identify, on_step=on_step, stop=lambda: stopped[0],
-                   window_s=args.window, hop_s=args.hop, gaps=args.gaps, regime_window_s=args.regime_window)
+                   window_s=args.window, hop_s=args.hop, gaps=args.gaps, regime_window_s=args.regime_window,
+                   identifier=remote)
     finally:
+        if remote is not None:
+            remote.close()
         viewer.close()
         if events:
             events.close()
@@ -173,9 +186,10 @@ def play_cmd(args) -> int:
             models.close()
     speed = rep.stream_s / rep.wall_s if rep.wall_s > 0 else float("inf")
     filled = int(np.count_nonzero(samples.filled))
-    cpu = time.process_time() - cpu0
+    cpu = time.process_time() - cpu0 + (remote.cpu_s if remote is not None else 0.0)
     print(f"played {rep.stream_s:.2f} s of data in {rep.wall_s:.2f} s ({speed:.1f} x real time; CPU {cpu:.2f} s, "
-          f"{rep.stream_s / cpu if cpu > 0 else float('inf'):.1f} x); events: "
+          f"{rep.stream_s / cpu if cpu > 0 else float('inf'):.1f} x"
+          + ("; identification in a second process" if remote is not None else "") + "); events: "
           + (", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "none")
           + (f"; {filled} lost frame(s) filled by interpolation" if filled else "")
           + (f"; viewer saved to {rrd}" if mode == "save" else "")

@@ -4,16 +4,26 @@ Pacing is against absolute deadlines: block k is released at
 wall_start + (t_k - t_start) / rate, computed from the start, never by
 sleeping "one block" after the previous one, so lateness does not accumulate
 (python-can issue 1372). ``rate=None`` plays as fast as the pipeline allows.
+
+As fast as possible, the rolling identification may run in a second process (``RemoteIdentifier``):
+it fits block k while this process filters, monitors and writes block k + 1, and its fits come one
+block behind. They are the same fits, bit for bit, in the same order (the identifier sees the same
+blocks); only the step that carries them moves.
 """
 
 from __future__ import annotations
 
+import multiprocessing
+import signal
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ident.live.pipeline import Pipeline, PipelineConfig, StepOutput, rolling_config
+import numpy as np
+
+from ident.live.pipeline import Pipeline, PipelineConfig, StepOutput, rolling_config, warm_up
 from ident.live.regimes import RegimeConfig
+from ident.live.rolling import RollingConfig, RollingIdentifier, WindowFit
 
 from .formats.base import Samples
 
@@ -28,16 +38,105 @@ class PlayReport:
     loops: int = 0
 
 
+def _serve(conn, cfg: RollingConfig) -> None:
+    """The second process: a RollingIdentifier fed blocks over ``conn`` ("ready" once its kernels are
+    loaded; per block the fits it completes; None asks for ``finish``). Ctrl-C is the parent's to handle."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        warm_up(identify=True)
+        ident = RollingIdentifier(cfg)
+    except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it as its own
+        conn.send(("error", exc, 0.0))
+        return
+    cpu0 = time.process_time()
+    conn.send(("ready", None, 0.0))
+    while True:
+        try:
+            block = conn.recv()
+        except EOFError:  # the parent is gone
+            return
+        try:
+            out = ident.finish() if block is None else ident.step(block)
+        except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it as its own
+            conn.send(("error", exc, time.process_time() - cpu0))
+            return
+        conn.send(("fits", out, time.process_time() - cpu0))
+        if block is None:
+            return
+
+
+class RemoteIdentifier:
+    """The rolling identification in a second process, for ``Pipeline(identifier=...)``: ``step(block)``
+    returns the fits of the block before (waiting for them) and hands this block over, so the two
+    processes work side by side; ``finish()`` returns the rest. Start it before the clock: the process
+    loads numpy, scipy and the compiled kernels (about a second from numba's cache), and ``ready()``
+    waits for that. A context manager: leaving it ends the process."""
+
+    def __init__(self, cfg: RollingConfig):
+        ctx = multiprocessing.get_context("spawn")  # not fork: numba's threads must not be copied
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_serve, args=(child, cfg), daemon=True, name="rolling-identification")
+        self._proc.start()
+        child.close()
+        self._busy = False  # a block handed over whose fits are not yet back
+        self._ready = False
+        self.cpu_s = 0.0  # CPU seconds the process has spent on blocks (its start-up not counted)
+
+    def _receive(self) -> list[WindowFit]:
+        try:
+            kind, value, self.cpu_s = self._conn.recv()
+        except (EOFError, ConnectionError):
+            raise RuntimeError("the rolling identification's process ended unexpectedly") from None
+        if kind == "error":
+            raise value
+        return value
+
+    def ready(self) -> None:
+        if not self._ready:
+            self._receive()
+            self._ready = True
+
+    def step(self, block: np.ndarray) -> list[WindowFit]:
+        self.ready()
+        out = self._receive() if self._busy else []
+        self._conn.send(np.asarray(block, float))
+        self._busy = True
+        return out
+
+    def finish(self) -> list[WindowFit]:
+        self.ready()
+        out = self._receive() if self._busy else []
+        self._conn.send(None)
+        self._busy = False
+        return out + self._receive()
+
+    def close(self) -> None:
+        self._conn.close()
+        self._proc.join(timeout=5.0)
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join()
+
+    def __enter__(self) -> RemoteIdentifier:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 def play(samples: Samples, *, rate: float | None = 1.0, start_s: float = 0.0, duration_s: float | None = None,
          loop: bool = False, identify: bool = True, on_step: Callable[[StepOutput], None] | None = None,
          stop: Callable[[], bool] | None = None, max_loops: int | None = None, window_s: float = 4.0,
          hop_s: float = 1.0, gaps: tuple[float, float] | None = None,
-         regime_window_s: float = RegimeConfig.window_s) -> PlayReport:
+         regime_window_s: float = RegimeConfig.window_s, identifier=None) -> PlayReport:
+    """``identifier``: where the rolling identification runs (default: in this process), e.g. a
+    ``RemoteIdentifier(rolling_config(samples.fs_hz, window_s, hop_s))``."""
     if rate is not None and not 0 < rate <= 1e6:
         raise ValueError(f"--rate must be a positive, finite speed, got {rate}")
     pipe = Pipeline(PipelineConfig(fs_hz=samples.fs_hz, identify=identify,
                                    rolling=rolling_config(samples.fs_hz, window_s, hop_s),
-                                   regime=RegimeConfig(fs_hz=samples.fs_hz, gap_m=gaps, window_s=regime_window_s)))
+                                   regime=RegimeConfig(fs_hz=samples.fs_hz, gap_m=gaps, window_s=regime_window_s)),
+                    identifier=identifier)
     rep = PlayReport()
     wall0 = time.monotonic()
     offset = 0.0  # stream time already played in earlier loops

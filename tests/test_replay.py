@@ -14,7 +14,8 @@ from clitools import run_main
 from daq.viewer import ENTITIES
 from ident.live.regimes import PHASE_WINDOWS, RegimeConfig
 from replay.cli import main as replay_main
-from replay.play import play
+from ident.live.pipeline import rolling_config
+from replay.play import RemoteIdentifier, play
 from replay.formats.mcap import read_recording
 from replay.formats import read_samples as read_mcap
 from replay.formats.csv import read_samples as read_csv
@@ -131,6 +132,48 @@ def test_transitions_events_file_and_viewer(tmp_path):
     stats = rerun_cli("rrd", "stats", str(rrd)).stdout
     for entity in ENTITIES:
         assert f"/{entity}:" in stats, entity
+
+
+def _same_fit(a, b) -> bool:
+    return (a.t_s == b.t_s and a.final == b.final and np.array_equal(a.predicted, b.predicted)
+            and all(np.array_equal(x.model.coefficients, y.model.coefficients) and x.error == y.error
+                    and np.array_equal(x.coefficient_std, y.coefficient_std) for x, y in zip(a.beams, b.beams)))
+
+
+def test_the_identification_in_a_second_process_gives_the_same_fits_one_block_behind():
+    """The same fits bit for bit and in the same order; each step carries what the step before carried in
+    one process, and the end carries the last block's with what the end carried."""
+    s = read_mcap(REC / "transitions.mcap")
+    local, remote = [], []
+    play(s, rate=None, duration_s=12.0, on_step=lambda out: local.append(out.fits))
+    with RemoteIdentifier(rolling_config(s.fs_hz)) as ident:
+        play(s, rate=None, duration_s=12.0, on_step=lambda out: remote.append(out.fits), identifier=ident)
+    assert sum(map(len, local)) >= 8 and len(remote) == len(local)
+    expected = [[]] + local[:-2] + [local[-2] + local[-1]]  # steps, then what finish() gave
+    assert [len(f) for f in remote] == [len(f) for f in expected]
+    assert all(_same_fit(a, b) for got, want in zip(remote, expected) for a, b in zip(got, want))
+
+
+def test_an_error_in_the_identifications_process_is_raised_here():
+    with RemoteIdentifier(rolling_config(2000.0)) as ident:
+        assert ident.step(np.zeros((10, 2))) == []  # its error comes back with the next call
+        with pytest.raises(ValueError, match="shape"):
+            ident.finish()
+    with RemoteIdentifier(rolling_config(2000.0, window_s=2.0)) as ident:  # refused as it starts
+        with pytest.raises(ValueError, match="too short for integration"):
+            ident.ready()
+
+
+def test_replay_max_identifies_in_a_second_process_with_the_same_models_and_events(tmp_path):
+    runs = {}
+    for name, extra in (("two", []), ("one", ["--one-process"])):
+        models, events = tmp_path / f"{name}.models.jsonl", tmp_path / f"{name}.events.jsonl"
+        p = cli("replay", str(REC / "transitions.mcap"), "--max", "--viewer", "none", "--models", str(models),
+                "--events", str(events), *extra)
+        assert p.returncode == 0, p.stderr
+        assert ("identification in a second process" in p.stdout) == (name == "two"), p.stdout
+        runs[name] = (models.read_bytes(), sorted(events.read_text().splitlines()))
+    assert runs["two"][0] and runs["two"] == runs["one"]  # the model lines in order; events as a set
 
 
 def test_pacing_holds_recorded_time_without_drift():

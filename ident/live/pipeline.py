@@ -141,14 +141,22 @@ def parse_gaps(text: str | None) -> tuple[float, float] | None:
 
 
 class Pipeline:
-    def __init__(self, cfg: PipelineConfig = PipelineConfig()):
+    """``identifier``: what runs the rolling identification (``step(block)`` and ``finish()`` giving
+    WindowFits), where it must not be this process's ``RollingIdentifier(cfg.rolling)``: a caller may run
+    it elsewhere (``replay.play.RemoteIdentifier``: in a second process, its fits one block behind)."""
+
+    def __init__(self, cfg: PipelineConfig = PipelineConfig(), identifier=None):
         if cfg.regime.fs_hz != cfg.fs_hz or cfg.rolling.fs_hz != cfg.fs_hz:
             cfg = replace(cfg, regime=replace(cfg.regime, fs_hz=cfg.fs_hz),
                           rolling=replace(cfg.rolling, fs_hz=cfg.fs_hz))
         self.cfg = cfg
         self._lp = lowpass_start(design_lowpass(cfg.fs_hz, cfg.cutoff_hz), 3)
         self.monitor = RegimeMonitor(cfg.regime)
-        self.rolling = RollingIdentifier(cfg.rolling) if cfg.identify else None
+        if not cfg.identify:
+            identifier = None
+        elif identifier is None:
+            identifier = RollingIdentifier(cfg.rolling)
+        self.rolling = identifier
         self.n_seen = 0
         self._started = False
         self._slow = SlowDriveWatch(cfg.regime.window_s)  # the regime_note about too short a regime window
@@ -164,6 +172,7 @@ class Pipeline:
         self._lp, y = lowpass_block(self._lp, x)
         rel = y[:, 1:] - y[:, :1]
         windows, changes = self.monitor.step(x)
+        # after the monitor: an identifier in another process works on this block while this one goes on
         fits = self.rolling.step(x) if self.rolling is not None else []
         return self._output(t, x, y, rel, windows, changes, fits)
 
