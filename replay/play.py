@@ -6,14 +6,15 @@ sleeping "one block" after the previous one, so lateness does not accumulate
 (python-can issue 1372). ``rate=None`` plays as fast as the pipeline allows.
 
 As fast as possible, the rolling identification may run in a second process (``RemoteIdentifier``):
-it fits block k while this process filters, monitors and writes block k + 1, and its fits come one
-block behind. They are the same fits, bit for bit, in the same order (the identifier sees the same
-blocks); only the step that carries them moves.
+it fits block k while this process filters, monitors and writes the blocks after it, and its fits come
+``LAG_BLOCKS`` blocks behind. They are the same fits, bit for bit, in the same order (the identifier
+sees the same blocks); only the step that carries them moves.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import queue
 import signal
 import time
 from collections.abc import Callable
@@ -38,55 +39,70 @@ class PlayReport:
     loops: int = 0
 
 
-def _serve(conn, cfg: RollingConfig) -> None:
-    """The second process: a RollingIdentifier fed blocks over ``conn`` ("ready" once its kernels are
-    loaded; per block the fits it completes; None asks for ``finish``). Ctrl-C is the parent's to handle."""
+LAG_BLOCKS = 8  # blocks the second process may fall behind: a window's fit (every hop) is a burst of work
+
+
+def _serve(blocks, results, cfg: RollingConfig) -> None:
+    """The second process: a RollingIdentifier fed blocks from one queue, its fits put on the other
+    ("ready" once its kernels are loaded; per block the fits it completes; None asks for ``finish``).
+    Ctrl-C is the parent's to handle; it ends when the parent does."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         warm_up(identify=True)
         ident = RollingIdentifier(cfg)
     except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it as its own
-        conn.send(("error", exc, 0.0))
+        results.put(("error", exc, 0.0))
         return
     cpu0 = time.process_time()
-    conn.send(("ready", None, 0.0))
+    results.put(("ready", None, 0.0))
+    parent = multiprocessing.parent_process()
     while True:
         try:
-            block = conn.recv()
-        except EOFError:  # the parent is gone
+            block = blocks.get(timeout=1.0)
+        except queue.Empty:
+            if parent is not None and not parent.is_alive():
+                return
+            continue
+        if isinstance(block, str):  # "stop": the parent leaves without the rest
             return
         try:
             out = ident.finish() if block is None else ident.step(block)
         except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it as its own
-            conn.send(("error", exc, time.process_time() - cpu0))
+            results.put(("error", exc, time.process_time() - cpu0))
             return
-        conn.send(("fits", out, time.process_time() - cpu0))
+        results.put(("fits", out, time.process_time() - cpu0))
         if block is None:
             return
 
 
 class RemoteIdentifier:
     """The rolling identification in a second process, for ``Pipeline(identifier=...)``: ``step(block)``
-    returns the fits of the block before (waiting for them) and hands this block over, so the two
-    processes work side by side; ``finish()`` returns the rest. Start it before the clock: the process
-    loads numpy, scipy and the compiled kernels (about a second from numba's cache), and ``ready()``
-    waits for that. A context manager: leaving it ends the process."""
+    hands the block over and returns the fits of the block ``lag`` blocks before it (waiting for them),
+    so that the second process works through a window's fit while this one goes on; ``finish()`` returns
+    the rest. The blocks and fits travel on queues (their feeder threads write, so neither side blocks
+    the other). Start it before the clock: the process loads numpy, scipy and the compiled kernels
+    (about a second from numba's cache), and ``ready()`` waits for that. A context manager: leaving it
+    ends the process."""
 
-    def __init__(self, cfg: RollingConfig):
+    def __init__(self, cfg: RollingConfig, lag: int = LAG_BLOCKS):
         ctx = multiprocessing.get_context("spawn")  # not fork: numba's threads must not be copied
-        self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_serve, args=(child, cfg), daemon=True, name="rolling-identification")
+        self._blocks, self._results = ctx.Queue(), ctx.Queue()
+        self._proc = ctx.Process(target=_serve, args=(self._blocks, self._results, cfg), daemon=True,
+                                 name="rolling-identification")
         self._proc.start()
-        child.close()
-        self._busy = False  # a block handed over whose fits are not yet back
+        self.lag = max(0, int(lag))
+        self._pending = 0  # blocks handed over whose fits are not yet back
         self._ready = False
         self.cpu_s = 0.0  # CPU seconds the process has spent on blocks (its start-up not counted)
 
     def _receive(self) -> list[WindowFit]:
-        try:
-            kind, value, self.cpu_s = self._conn.recv()
-        except (EOFError, ConnectionError):
-            raise RuntimeError("the rolling identification's process ended unexpectedly") from None
+        while True:
+            try:
+                kind, value, self.cpu_s = self._results.get(timeout=1.0)
+                break
+            except queue.Empty:
+                if not self._proc.is_alive() and self._results.empty():
+                    raise RuntimeError("the rolling identification's process ended unexpectedly") from None
         if kind == "error":
             raise value
         return value
@@ -98,24 +114,31 @@ class RemoteIdentifier:
 
     def step(self, block: np.ndarray) -> list[WindowFit]:
         self.ready()
-        out = self._receive() if self._busy else []
-        self._conn.send(np.asarray(block, float))
-        self._busy = True
-        return out
+        self._blocks.put(np.asarray(block, float))
+        self._pending += 1
+        if self._pending <= self.lag:
+            return []
+        self._pending -= 1
+        return self._receive()
 
     def finish(self) -> list[WindowFit]:
         self.ready()
-        out = self._receive() if self._busy else []
-        self._conn.send(None)
-        self._busy = False
-        return out + self._receive()
+        self._blocks.put(None)
+        out = []
+        for _ in range(self._pending + 1):
+            out += self._receive()
+        self._pending = 0
+        return out
 
     def close(self) -> None:
-        self._conn.close()
+        if self._proc.is_alive():
+            self._blocks.put("stop")
+        self._blocks.close()
         self._proc.join(timeout=5.0)
         if self._proc.is_alive():
             self._proc.terminate()
             self._proc.join()
+        self._results.close()
 
     def __enter__(self) -> RemoteIdentifier:
         return self
@@ -140,7 +163,7 @@ def play(samples: Samples, *, rate: float | None = 1.0, start_s: float = 0.0, du
     rep = PlayReport()
     wall0 = time.monotonic()
     offset = 0.0  # stream time already played in earlier loops
-    block_s = 0.05 if rate is not None else 0.5  # as fast as possible: fewer, larger blocks
+    block_s = 0.05 if rate is not None else 2.0  # as fast as possible: fewer, larger blocks
     while True:
         t_first = None
         for t, vals in samples.blocks(start_s, duration_s, block_s):

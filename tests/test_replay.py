@@ -15,7 +15,7 @@ from daq.viewer import ENTITIES
 from ident.live.regimes import PHASE_WINDOWS, RegimeConfig
 from replay.cli import main as replay_main
 from ident.live.pipeline import rolling_config
-from replay.play import RemoteIdentifier, play
+from replay.play import LAG_BLOCKS, RemoteIdentifier, play
 from replay.formats.mcap import read_recording
 from replay.formats import read_samples as read_mcap
 from replay.formats.csv import read_samples as read_csv
@@ -140,16 +140,17 @@ def _same_fit(a, b) -> bool:
                     and np.array_equal(x.coefficient_std, y.coefficient_std) for x, y in zip(a.beams, b.beams)))
 
 
-def test_the_identification_in_a_second_process_gives_the_same_fits_one_block_behind():
-    """The same fits bit for bit and in the same order; each step carries what the step before carried in
-    one process, and the end carries the last block's with what the end carried."""
+@pytest.mark.parametrize("lag", [1, LAG_BLOCKS])
+def test_the_identification_in_a_second_process_gives_the_same_fits_lag_blocks_behind(lag):
+    """The same fits bit for bit and in the same order; each step carries what the step ``lag`` before
+    carried in one process, and the end carries the last ``lag`` blocks' with what the end carried."""
     s = read_mcap(REC / "transitions.mcap")
     local, remote = [], []
-    play(s, rate=None, duration_s=12.0, on_step=lambda out: local.append(out.fits))
-    with RemoteIdentifier(rolling_config(s.fs_hz)) as ident:
-        play(s, rate=None, duration_s=12.0, on_step=lambda out: remote.append(out.fits), identifier=ident)
-    assert sum(map(len, local)) >= 8 and len(remote) == len(local)
-    expected = [[]] + local[:-2] + [local[-2] + local[-1]]  # steps, then what finish() gave
+    play(s, rate=None, on_step=lambda out: local.append(out.fits))
+    with RemoteIdentifier(rolling_config(s.fs_hz), lag=lag) as ident:
+        play(s, rate=None, on_step=lambda out: remote.append(out.fits), identifier=ident)
+    assert sum(map(len, local)) >= 8 and len(remote) == len(local) > lag + 1
+    expected = [[]] * lag + local[:-lag - 1] + [sum(local[-lag - 1:], [])]  # steps, then what finish() gave
     assert [len(f) for f in remote] == [len(f) for f in expected]
     assert all(_same_fit(a, b) for got, want in zip(remote, expected) for a, b in zip(got, want))
 
