@@ -164,10 +164,11 @@ def play_cmd(args) -> int:
             elif e["kind"] == "regime_note":
                 print(f"{e['t']:9.2f} s  note: {e['message']}", flush=True)
 
-    # as fast as possible on two cores or more, the rolling identification works in a second process
-    remote = (RemoteIdentifier(rolling_config(samples.fs_hz, args.window, args.hop))
-              if args.max and not args.no_identify and not args.one_process and (os.cpu_count() or 1) >= 2 else None)
+    remote = None
     try:
+        # as fast as possible on two cores or more, the rolling identification works in a second process
+        if args.max and not args.no_identify and not args.one_process and (os.cpu_count() or 1) >= 2:
+            remote = RemoteIdentifier(rolling_config(samples.fs_hz, args.window, args.hop))
         compile_s = compile_kernels(identify=not args.no_identify)  # before the clock starts: no window waits
         if remote is not None:
             remote.ready()  # its kernels loaded (it started before ours compiled), before the clock too

@@ -90,6 +90,7 @@ class RemoteIdentifier:
         self._proc = ctx.Process(target=_serve, args=(self._blocks, self._results, cfg), daemon=True,
                                  name="rolling-identification")
         self._proc.start()
+        self.cfg = cfg
         self.lag = max(0, int(lag))
         self._pending = 0  # blocks handed over whose fits are not yet back
         self._ready = False

@@ -14,7 +14,8 @@ from clitools import run_main
 from daq.viewer import ENTITIES
 from ident.live.regimes import PHASE_WINDOWS, RegimeConfig
 from replay.cli import main as replay_main
-from ident.live.pipeline import rolling_config
+from ident.live.pipeline import Pipeline, PipelineConfig, rolling_config
+from ident.live.rolling import RollingIdentifier
 from replay.play import LAG_BLOCKS, RemoteIdentifier, play
 from replay.formats.mcap import read_recording
 from replay.formats import read_samples as read_mcap
@@ -153,6 +154,13 @@ def test_the_identification_in_a_second_process_gives_the_same_fits_lag_blocks_b
     expected = [[]] * lag + local[:-lag - 1] + [sum(local[-lag - 1:], [])]  # steps, then what finish() gave
     assert [len(f) for f in remote] == [len(f) for f in expected]
     assert all(_same_fit(a, b) for got, want in zip(remote, expected) for a, b in zip(got, want))
+
+
+def test_an_identifier_built_for_another_config_is_refused():
+    cfg = PipelineConfig(fs_hz=2000.0, rolling=rolling_config(2000.0))
+    Pipeline(cfg, identifier=RollingIdentifier(rolling_config(2000.0)))
+    with pytest.raises(ValueError, match="not the pipeline's"):
+        Pipeline(cfg, identifier=RollingIdentifier(rolling_config(2000.0, window_s=6.0)))
 
 
 def test_an_error_in_the_identifications_process_is_raised_here():

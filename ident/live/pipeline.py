@@ -141,9 +141,10 @@ def parse_gaps(text: str | None) -> tuple[float, float] | None:
 
 
 class Pipeline:
-    """``identifier``: what runs the rolling identification (``step(block)`` and ``finish()`` giving
-    WindowFits), where it must not be this process's ``RollingIdentifier(cfg.rolling)``: a caller may run
-    it elsewhere (``replay.play.RemoteIdentifier``: in a second process, its fits one block behind)."""
+    """``identifier``: what runs the rolling identification, where a caller wants it elsewhere than in
+    this process (``replay.play.RemoteIdentifier``: in a second process, its fits a few blocks behind);
+    anything with ``cfg`` (the pipeline's rolling config), ``step(block)`` and ``finish()`` giving
+    WindowFits. Default: a ``RollingIdentifier(cfg.rolling)`` here."""
 
     def __init__(self, cfg: PipelineConfig = PipelineConfig(), identifier=None):
         if cfg.regime.fs_hz != cfg.fs_hz or cfg.rolling.fs_hz != cfg.fs_hz:
@@ -156,6 +157,8 @@ class Pipeline:
             identifier = None
         elif identifier is None:
             identifier = RollingIdentifier(cfg.rolling)
+        elif identifier.cfg != cfg.rolling:
+            raise ValueError("the identifier's rolling config is not the pipeline's")
         self.rolling = identifier
         self.n_seen = 0
         self._started = False
