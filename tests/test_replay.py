@@ -15,7 +15,7 @@ from daq.viewer import ENTITIES
 from ident.live.regimes import PHASE_WINDOWS, RegimeConfig
 from replay.cli import main as replay_main
 from ident.live.pipeline import Pipeline, PipelineConfig, rolling_config
-from ident.live.rolling import RollingIdentifier
+from ident.live.rolling import RollingConfig, RollingIdentifier
 from replay.play import LAG_BLOCKS, RemoteIdentifier, play
 from replay.formats.mcap import read_recording
 from replay.formats import read_samples as read_mcap
@@ -168,7 +168,7 @@ def test_an_error_in_the_identifications_process_is_raised_here():
         assert ident.step(np.zeros((10, 2))) == []  # its error comes back with the next call
         with pytest.raises(ValueError, match="shape"):
             ident.finish()
-    with RemoteIdentifier(rolling_config(2000.0, window_s=2.0)) as ident:  # refused as it starts
+    with RemoteIdentifier(RollingConfig(fs_hz=2000.0, window_s=2.0)) as ident:  # refused as it starts
         with pytest.raises(ValueError, match="too short for integration"):
             ident.ready()
 

@@ -57,8 +57,10 @@ def rolling_config(fs_hz: float, window_s: float = 4.0, hop_s: float = 1.0) -> R
         raise ValueError(f"--window and --hop must be positive seconds, got {window_s} and {hop_s}")
     if hop_s > window_s:
         raise ValueError(f"--hop {hop_s} s is longer than --window {window_s} s; windows would skip data")
-    if window_s < 2.0:
-        raise ValueError(f"--window {window_s} s is too short: the integration to displacement needs at least 2 s")
+    shortest = 4.0 / RollingConfig.f_lo_hz  # the integration's edges (``RollingIdentifier``)
+    if window_s <= shortest:
+        raise ValueError(f"--window {window_s:g} s is too short: the integration to displacement needs more than "
+                         f"{shortest:g} s")
     return RollingConfig(fs_hz=fs_hz, window_s=window_s, hop_s=hop_s)
 
 

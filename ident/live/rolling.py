@@ -166,7 +166,7 @@ class RollingIdentifier:
             raise ValueError("hop_s must not exceed window_s")
         if 2 * edge_samples(cfg.fs_hz, cfg.f_lo_hz) >= cfg.window_s * cfg.fs_hz / 2:
             raise ValueError(f"window_s {cfg.window_s} s is too short for integration above {cfg.f_lo_hz} Hz; "
-                             f"give at least {4 / cfg.f_lo_hz:.1f} s")
+                             f"give more than {4 / cfg.f_lo_hz:g} s")
         self.cfg = cfg
         self.n_window = int(round(cfg.window_s * cfg.fs_hz))
         self.n_hop = int(round(cfg.hop_s * cfg.fs_hz))
