@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ident.cli import DURATION, REGIME_WINDOW, SEED, WINDOW, OneLineParser, number, run_guarded
-from ident.live.pipeline import (Pipeline, PipelineConfig, kernels_cached, model_records, parse_gaps,
+from ident.live.pipeline import (Pipeline, PipelineConfig, check_window, kernels_cached, model_records, parse_gaps,
                                  rolling_config, warm_up)
 from ident.live.regimes import MIN_PERIODS, RegimeConfig
 
@@ -116,8 +116,10 @@ def _gaps(text: str) -> tuple[float, float]:
 
 
 def check_live(args) -> None:
+    """The live options, before any output is made (a refused run leaves no file behind)."""
     if args.hop > args.window:
         raise ValueError(f"--hop {args.hop:g} s is longer than --window {args.window:g} s")
+    check_window(args.window, args.hop)
 
 
 def sim(args) -> int:

@@ -163,6 +163,15 @@ def test_an_identifier_built_for_another_config_is_refused():
         Pipeline(cfg, identifier=RollingIdentifier(rolling_config(2000.0, window_s=6.0)))
 
 
+@pytest.mark.parametrize("extra", [[], ["--max"], ["--max", "--one-process"]])
+def test_a_refused_window_leaves_no_output_behind(tmp_path, extra):
+    events = tmp_path / "ev.jsonl"
+    code, out, err, tb = run_main(replay_main, [str(REC / "linear.mcap"), "--window", "2", "--viewer", "none",
+                                                "--events", str(events), *extra])
+    assert tb is None and code == 2 and "needs more than 2 s" in err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_an_error_in_the_identifications_process_is_raised_here():
     with RemoteIdentifier(rolling_config(2000.0)) as ident:
         assert ident.step(np.zeros((10, 2))) == []  # its error comes back with the next call

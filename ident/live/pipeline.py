@@ -52,7 +52,13 @@ class StepOutput:
 
 
 def rolling_config(fs_hz: float, window_s: float = 4.0, hop_s: float = 1.0) -> RollingConfig:
-    """The rolling identification's window and hop in seconds, checked."""
+    """The rolling identification's window and hop in seconds, checked (``check_window``)."""
+    check_window(window_s, hop_s)
+    return RollingConfig(fs_hz=fs_hz, window_s=window_s, hop_s=hop_s)
+
+
+def check_window(window_s: float, hop_s: float) -> None:
+    """--window and --hop as the rolling identification needs them, before any output is made."""
     if not (window_s > 0 and hop_s > 0):
         raise ValueError(f"--window and --hop must be positive seconds, got {window_s} and {hop_s}")
     if hop_s > window_s:
@@ -61,7 +67,6 @@ def rolling_config(fs_hz: float, window_s: float = 4.0, hop_s: float = 1.0) -> R
     if window_s <= shortest:
         raise ValueError(f"--window {window_s:g} s is too short: the integration to displacement needs more than "
                          f"{shortest:g} s")
-    return RollingConfig(fs_hz=fs_hz, window_s=window_s, hop_s=hop_s)
 
 
 def _per_term(model, values: np.ndarray, keep: np.ndarray) -> dict[str, dict[str, float]]:
