@@ -7,10 +7,17 @@ delay embedding, TVRegDiff derivatives, a sparsity sweep chosen by integration
 error and SQP refinement (Stender et al. 2019). The only I/O lives in ident.cli.
 """
 
-from .library import PolynomialForcingLibrary
-from .model import SindyModel
-from .sindy import Identification, identify, refine, stlsq, sweep
-from .simulate import simulate
+import os
+
+# numpy held to its AVX2 kernels before it is imported, as ``daq`` does (daq/__init__.py says why; this is
+# the same value, which a test checks: ident cannot import daq)
+NUMPY_SIMD_PIN = "X86_V4 AVX512_ICL AVX512_SPR"
+os.environ.setdefault("NPY_DISABLE_CPU_FEATURES", NUMPY_SIMD_PIN)
+
+from .library import PolynomialForcingLibrary  # noqa: E402 - after the pin
+from .model import SindyModel  # noqa: E402
+from .sindy import Identification, identify, refine, stlsq, sweep  # noqa: E402
+from .simulate import simulate  # noqa: E402
 
 __all__ = ["PolynomialForcingLibrary", "SindyModel", "Identification", "identify", "refine",
            "stlsq", "sweep", "simulate"]

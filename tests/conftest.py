@@ -2,7 +2,11 @@
 
 import os
 
-import numpy as np
+from daq import NUMPY_SIMD_PIN  # before numpy: holds it to its AVX2 kernels, as the commands do (daq/__init__.py)
+
+os.environ.setdefault("NPY_DISABLE_CPU_FEATURES", NUMPY_SIMD_PIN)  # (daq's import has set it already)
+
+import numpy as np  # noqa: E402
 import pytest
 
 

@@ -245,9 +245,10 @@ def test_a_friction_three_times_better_at_its_own_beam_is_named_there_not_ambigu
 def test_an_overdamped_pole_above_the_band_is_dropped_where_it_lets_the_free_runs_wander(monkeypatch):
     # seed 45, a joint at tip 1 (1 kHz): the fit in the modes' band (5.2-65 Hz) keeps a pole above it at
     # zeta > 0.5 (490 Hz). The fit follows round-off and the record's padding, and so does what that pole does
-    # to a free run: on stop 55-63's host it cut the fit's error and made the held-out free runs err 0.23
-    # (0.056 without it), and the rule dropped it; on stop 64's host the same pole's free runs do not wander
-    # (the training blocks' 0.042 with it, 0.055 without), and the rule keeps it. (Seed 53 was this test's case
+    # to a free run: with numpy's AVX2 kernels (daq/__init__.py) it cuts the fit's error and makes the
+    # held-out free runs err 0.23 (0.056 without it), and the rule drops it; with its AVX-512 kernels (stop 64's
+    # host before numpy was held to AVX2) the same pole's free runs do not wander (the training blocks' 0.042
+    # with it, 0.055 without), and the rule keeps it. (Seed 53 was this test's case
     # until the band-pass's FFT length changed; a check on a refit of two thirds of the training blocks had
     # kept such a pole on another host.) So the test holds the rule to its contract on whatever the host fits:
     # the baseline it leaves predicts the held-out blocks, and a pole it keeps is one that does not wander

@@ -8,9 +8,13 @@ reading every file's syntax tree (which also catches an import hidden inside a f
 """
 
 import ast
+import os
 import subprocess
 import sys
 from pathlib import Path
+
+import daq
+import ident
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -110,3 +114,20 @@ def test_importing_daq_acquisition_loads_no_replay():
             "print(','.join(sorted(m for m in sys.modules if m.split('.')[0] == 'replay')))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip() == ""
+
+
+def test_numpy_is_held_to_its_avx2_kernels_by_every_package_alike():
+    """daq/__init__.py says why; ident carries the same value (it cannot import daq). In a fresh process that
+    imports a package before numpy, numpy's x86-64 level 4 (AVX-512) kernels are off, and a user's own
+    setting is kept."""
+    assert ident.NUMPY_SIMD_PIN == daq.NUMPY_SIMD_PIN
+    probe = ("import {pkg}, os; from numpy._core._multiarray_umath import __cpu_features__ as f; "
+             "print(f.get('X86_V4', False), os.environ['NPY_DISABLE_CPU_FEATURES'])")
+    env = {k: v for k, v in os.environ.items() if k != "NPY_DISABLE_CPU_FEATURES"}
+    for pkg in ("ident", "daq", "replay"):
+        out = subprocess.run([sys.executable, "-c", probe.format(pkg=pkg)], capture_output=True, text=True,
+                             env=env, check=True).stdout.split(maxsplit=1)
+        assert out == ["False", daq.NUMPY_SIMD_PIN + "\n"], (pkg, out)
+    out = subprocess.run([sys.executable, "-c", probe.format(pkg="ident")], capture_output=True, text=True,
+                         env={**env, "NPY_DISABLE_CPU_FEATURES": "AVX512_SPR"}, check=True).stdout.split()
+    assert out[1] == "AVX512_SPR"
