@@ -19,6 +19,7 @@ finding.
 from __future__ import annotations
 
 import json
+import os
 import platform
 import time
 from collections import Counter
@@ -28,6 +29,7 @@ from pathlib import Path
 import numba
 import numpy as np
 import scipy
+from numpy._core._multiarray_umath import __cpu_features__ as CPU_FEATURES  # numpy's kernels in use
 from daq.safeio import PartFile, part_path
 from daq.sim.hidden import hidden_case
 from daq.sim.independent.cases import discovery_case
@@ -379,7 +381,15 @@ def environment() -> str:
     except OSError:
         pass
     return (f"numpy {np.__version__}, scipy {scipy.__version__}, numba {numba.__version__}, "
-            f"Python {platform.python_version()}, {cpu}, one BLAS thread per case")
+            f"Python {platform.python_version()}, {cpu}, one BLAS thread per case, numpy's SIMD kernels "
+            f"{simd_level()}")
+
+
+def simd_level() -> str:
+    """The highest x86-64 level of numpy's kernels in use (the AVX-512 ones are held off by default: see
+    daq/__init__.py), and what NPY_DISABLE_CPU_FEATURES says."""
+    levels = [k for k in ("X86_V2", "X86_V3", "X86_V4") if CPU_FEATURES.get(k)]
+    return (levels[-1] if levels else "baseline") + f" (NPY_DISABLE_CPU_FEATURES={os.environ.get('NPY_DISABLE_CPU_FEATURES', '')!r})"
 
 
 def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: int | None = None,
