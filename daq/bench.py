@@ -103,12 +103,12 @@ def _live(args, py, c_start, w_start) -> None:
         def speed(extra):
             out = subprocess.run(replay + extra, check=True, capture_output=True, text=True).stdout
             m = re.search(r"\(([\d.]+) x real time; CPU [\d.]+ s, ([\d.]+) x[;)]", out)
-            return float(m.group(1)), float(m.group(2))
+            return float(m.group(1)), float(m.group(2)), "identification in a second process" in out
 
         # interleaved, so that a load that comes and goes touches every variant alike
         runs = [(speed([]), speed(["--one-process"]), speed(["--no-identify"])) for _ in range(3)]
-        with_id, one, without = (np.array([r[k] for r in runs]) for k in range(3))
-        where = "in a second process" if (os.cpu_count() or 1) >= 2 else "one core: in one process"
+        with_id, one, without = (np.array([r[k][:2] for r in runs]) for k in range(3))
+        where = "in a second process" if runs[0][0][2] else "in one process (one core)"  # as replay said
         print(f"replay --max : {np.median(with_id[:, 0]):6.0f} x real time with identification "
               f"({np.median(with_id[:, 1]):.0f} x in CPU time; {where}), "
               f"{np.median(one[:, 0]):6.0f} x with it in one process ({np.median(one[:, 1]):.0f} x in CPU time), "

@@ -62,7 +62,7 @@ def check_window(window_s: float, hop_s: float) -> None:
     if not (window_s > 0 and hop_s > 0):
         raise ValueError(f"--window and --hop must be positive seconds, got {window_s} and {hop_s}")
     if hop_s > window_s:
-        raise ValueError(f"--hop {hop_s} s is longer than --window {window_s} s; windows would skip data")
+        raise ValueError(f"--hop {hop_s:g} s is longer than --window {window_s:g} s; windows would skip data")
     shortest = 4.0 / RollingConfig.f_lo_hz  # the integration's edges (``RollingIdentifier``)
     if window_s <= shortest:
         raise ValueError(f"--window {window_s:g} s is too short: the integration to displacement needs more than "
