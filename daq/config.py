@@ -109,6 +109,9 @@ class DaqConfig:
     flush_s: float = field(default=1.0, metadata={"gt": 0.0, "max": 10.0})
     reconnect_backoff_s: tuple[float, ...] = field(default=(0.05, 0.1, 0.2, 0.5, 1.0),
                                                    metadata={"min": 0.0, "max": 60.0, "max_len": 32})
+    # how long acquisition waits for a lost port to come back, or for a silent one to send, before it stops
+    # with an error (what came before stays recorded); 0 waits until Ctrl-C
+    give_up_s: float = field(default=300.0, metadata={"min": 0.0, "max": 1e7})
     calibration: Calibrations = field(default_factory=Calibrations)
     faults: Faults = field(default_factory=Faults)
 

@@ -226,6 +226,8 @@ class Acquisition:
         if opened is not None:
             opened.set()
         backoff = list(self.config.daq.reconnect_backoff_s) or [0.5]
+        give_up = self.config.daq.give_up_s
+        heard = self.now()  # when the port last delivered a byte (or was opened)
         try:
             while not self.stop_event.is_set():
                 try:
@@ -234,13 +236,18 @@ class Acquisition:
                     port = self._reconnect(port, exc, backoff)
                     if port is None:
                         break
+                    heard = self.now()
                     continue
                 if not data:
                     if self._held is not None and self.now() - self._held.t0 > IDENTIFY_S:
                         self._foreign(f"{self.port_given} answered without a status frame within {IDENTIFY_S} s "
                                       f"after the reconnect; the recorded device sends one every second")
                         break
+                    if give_up > 0 and self.now() - heard > give_up:
+                        self._give_up(f"nothing arrived from {self.port_given} for {give_up:g} s")
+                        break
                     continue
+                heard = self.now()
                 try:
                     if self._handle(data, duration_s):
                         break
@@ -271,6 +278,12 @@ class Acquisition:
         self._event("foreign_device", f"{message}; {n_bytes} byte(s) read from it were not recorded; "
                     "acquisition stopped", "error", bytes_discarded=n_bytes)
 
+    def _give_up(self, message: str) -> None:
+        """Stop waiting for a device that is gone or silent (``daq.give_up_s``): the recording ends with an
+        error, and everything received before stays in it."""
+        self.error = f"{message} (daq.give_up_s; 0 waits until Ctrl-C)"
+        self._event("give_up", f"{message}; acquisition stopped", "error")
+
     def _reconnect(self, port, exc, backoff):
         t_lost = self.now()
         self._event("disconnect", f"port lost: {exc}", "warning")
@@ -278,8 +291,13 @@ class Acquisition:
             port.close()
         except (serial.SerialException, OSError):
             pass
+        give_up = self.config.daq.give_up_s
         attempt = 0
         while not self.stop_event.is_set():
+            if give_up > 0 and self.now() - t_lost > give_up:
+                self._give_up(f"{self.port_given} was lost and did not come back within {give_up:g} s "
+                              f"({attempt} attempts to reopen it)")
+                return None
             time.sleep(backoff[min(attempt, len(backoff) - 1)])
             attempt += 1
             try:

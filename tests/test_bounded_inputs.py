@@ -46,6 +46,7 @@ ALIAS_BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
     (ALIAS_BOMB, "aliases|anchors"),
     ("[" * 5000 + "]" * 5000, "nested deeper than 32"),
     ("daq: {reconnect_backoff_s: [-1]}", "daq.reconnect_backoff_s = -1.0 is out of range"),
+    ("daq: {give_up_s: -1}", "daq.give_up_s = -1.0 is out of range"),
     ("sensors: {base: {range_m_per_s2: 0}}", "sensors.base.range_m_per_s2 = 0.0 is out of range"),
     ("sensors: {tip1: {adc_bits: 0}}", "sensors.tip1.adc_bits = 0 is out of range"),
     ("sensors: {tip1: {adc_bits: 64}}", "sensors.tip1.adc_bits = 64 is out of range"),
@@ -130,7 +131,7 @@ VALUES = st.recursive(
     max_leaves=8)
 
 KEYS = {
-    "daq": ["rate_hz", "baudrate", "flush_s", "reconnect_backoff_s", "calibration", "faults", "format", "lines"],
+    "daq": ["rate_hz", "baudrate", "flush_s", "reconnect_backoff_s", "give_up_s", "calibration", "faults", "format", "lines"],
     "daq.lines": ["delimiter", "columns", "base", "tip1", "tip2", "counter", "time", "clipped", "time_unit_s",
                   "time_wrap", "counter_bits", "max_line_bytes"],
     "daq.faults": ["corrupt_byte_rate", "drop_byte_rate", "garbage_bursts_per_s", "garbage_burst_bytes",

@@ -123,6 +123,52 @@ def test_disconnect_and_reconnect_mid_recording(tmp_path):
     assert rerun_cli("mcap", "check", str(out)).returncode == 0
 
 
+def test_a_device_that_does_not_come_back_ends_the_recording_and_keeps_what_came_before(tmp_path):
+    """--duration counts seconds of samples: a device gone for good (here for 60 s, from 2 s on) had kept the
+    recording waiting until Ctrl-C. After ``daq.give_up_s`` it ends, in one line and exit code 2, with the
+    2 s received before the loss intact in a recording an independent reader checks."""
+    cfg = tmp_path / "rig.yaml"
+    cfg.write_text("daq:\n  give_up_s: 1.0\n  faults:\n    disconnect_at_s: [2.0]\n    disconnect_for_s: 60.0\n")
+    out = tmp_path / "gone.mcap"
+    t0 = time.monotonic()
+    proc = cli("daq", "record", "--sim", "--config", str(cfg), "--duration", "8", "-o", str(out), "--quiet",
+               "--no-identify", timeout=60)
+    assert time.monotonic() - t0 < 40  # not the device's 60 s: it gave up
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert "did not come back within 1 s" in proc.stderr and f"what came before is kept in {out}" in proc.stderr
+    rec = read_recording(out)
+    assert 1.5 * 2000 < rec.seq.size <= 2.2 * 2000  # the 2 s before the loss
+    assert np.all(np.diff(rec.seq) == 1)
+    kinds = [e["kind"] for e in rec.events]
+    assert kinds.index("disconnect") < kinds.index("give_up") and "reconnect" not in kinds
+    assert rerun_cli("mcap", "check", str(out)).returncode == 0
+
+
+def test_a_silent_port_ends_the_recording_after_give_up_s(tmp_path):
+    """A port that opens and never sends (a device that hung, the wrong adapter): the recording ends after
+    ``daq.give_up_s`` in one line, with an empty but complete recording; 0 keeps waiting (the default is
+    finite: a timed run does not wait forever)."""
+    master, slave = os.openpty()
+    path = os.ttyname(slave)
+    try:
+        cfg = tmp_path / "rig.yaml"
+        cfg.write_text("daq:\n  give_up_s: 1.5\n")
+        out = tmp_path / "silent.mcap"
+        t0 = time.monotonic()
+        proc = cli("daq", "record", "--port", path, "--config", str(cfg), "--duration", "5", "-o",
+                   str(out), "--quiet", "--no-identify", timeout=60)
+        waited = time.monotonic() - t0
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert proc.returncode == 2, proc.stderr
+    assert f"nothing arrived from {path} for 1.5 s" in proc.stderr and len(proc.stderr.splitlines()) == 1
+    assert waited < 30
+    rec = read_recording(out)
+    assert rec.seq.size == 0 and any(e["kind"] == "give_up" for e in rec.events)
+
+
 def test_kill_9_then_recover_loses_at_most_one_second(tmp_path):
     out = tmp_path / "killed.mcap"
     proc = subprocess.Popen([sys.executable, "-m", "daq", "record", "--sim", "-o", str(out)],
