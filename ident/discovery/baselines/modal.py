@@ -192,6 +192,38 @@ def drivable(poles: np.ndarray, prep: Prepared) -> np.ndarray:
     return structural(poles, prep) & (zeta * np.abs(poles) * prep.n / prep.fs_hz >= RESOLVED)
 
 
+ZETA_MAX = 0.99  # the largest damping ratio a fitted baseline's pole keeps (``undegenerate``)
+
+
+def bounded(poles: np.ndarray) -> np.ndarray:
+    """The poles with damping ratios above ``ZETA_MAX`` brought down to it, the decay rate kept."""
+    poles = np.asarray(poles, complex)
+    return poles.real + 1j * np.maximum(poles.imag, np.sqrt(1.0 - ZETA_MAX ** 2) / ZETA_MAX * np.abs(poles.real))
+
+
+def undegenerate(model: LinearModel, prep: Prepared, rows: np.ndarray) -> tuple[LinearModel, float] | None:
+    """The fitted model with its poles above ``ZETA_MAX`` brought down to it and the residues fitted again
+    on ``rows`` (with the fit's NRMSE there); None where every pole is below.
+
+    A device pole of the fit (the drift of integrated accelerations, below the band) can end at zeta = 1
+    with an imaginary part near zero: the pair p, conj(p) is then one real pole twice, its two columns of
+    the design nearly the same, and the residues that tell them apart reach 1e22 (independent seed 58,
+    nothing hidden: a 0.32 Hz pole). Each block's state, read off the data through those columns, starts
+    every free run off: the training blocks ran free at 0.32 and the held-out ones at 0.34 (the
+    instruments' noise floor 0.018); with the same pole at zeta 0.99 and its residues fitted again, 0.044
+    and 0.040. An overdamped pair at 0.99 follows a drift as well as a critically damped one.
+
+    Only the fitted baseline is repaired, after its fit: capping the damping inside every pole search
+    (the joint refits' too) moved eleven verdicts of the benchmark's hundred, five right ones lost and
+    three gained (stop 65)."""
+    p = np.asarray(model.poles, complex)
+    if not np.any(-p.real / np.maximum(np.abs(p), 1e-300) > ZETA_MAX):
+        return None
+    q = bounded(p)
+    C, fit = fit_residues(q, prep, rows)
+    return LinearModel(q, np.ones((1, q.size), complex), C), _nrmse(fit, prep.measured[rows])
+
+
 def refine_poles(poles: np.ndarray, prep: Prepared, rows: np.ndarray, elements=(), forces=(),
                  max_nfev: int = 20, stride: int = 2, free: np.ndarray | None = None) -> np.ndarray:
     """Poles by least squares on the fit error over ``rows`` (every ``stride``-th) with the residues solved
@@ -497,6 +529,9 @@ class ModalBaseline(Baseline):
     def fit(cls, prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
             poles0: np.ndarray | None = None, check: np.ndarray | None = None) -> "ModalBaseline":
         model, err = fit_model(prep, rows, max_modes, poles0, check)
+        repaired = undegenerate(model, prep, rows)
+        if repaired is not None:
+            model, err = repaired
         return cls(model, prep.driving_point if prep.excitation_kind == "force" else None, err,
                    drivable(model.poles, prep))
 
