@@ -4,6 +4,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -13,7 +14,8 @@ import yaml
 
 from clitools import run_main
 from daq.cli import main as daq_main
-from daq.driver import ClockEstimator
+from daq.config import load_config
+from daq.driver import Acquisition, ClockEstimator
 from daq.protocol import Decoder
 from daq.transport import register_url_handler
 from replay.formats.mcap import read_recording
@@ -147,8 +149,7 @@ def test_a_device_that_does_not_come_back_ends_the_recording_and_keeps_what_came
 
 def test_a_silent_port_ends_the_recording_after_give_up_s(tmp_path):
     """A port that opens and never sends (a device that hung, the wrong adapter): the recording ends after
-    ``daq.give_up_s`` in one line, with an empty but complete recording; 0 keeps waiting (the default is
-    finite: a timed run does not wait forever)."""
+    ``daq.give_up_s`` in one line, with an empty but complete recording."""
     master, slave = os.openpty()
     path = os.ttyname(slave)
     try:
@@ -167,6 +168,26 @@ def test_a_silent_port_ends_the_recording_after_give_up_s(tmp_path):
     assert waited < 30
     rec = read_recording(out)
     assert rec.seq.size == 0 and any(e["kind"] == "give_up" for e in rec.events)
+
+
+def test_give_up_s_0_waits_for_a_silent_port_until_stopped(tmp_path):
+    """``give_up_s: 0`` is the unattended run that outlasts any outage: silence past every bound the tests use
+    stops nothing, and stop() (Ctrl-C's path) ends it without an error."""
+    master, slave = os.openpty()
+    try:
+        cfg = tmp_path / "rig.yaml"
+        cfg.write_text("daq:\n  give_up_s: 0\n")
+        acq = Acquisition(os.ttyname(slave), load_config(cfg))
+        run = threading.Thread(target=acq.run, args=(5.0,))
+        run.start()
+        time.sleep(2.0)
+        assert run.is_alive() and acq.error is None
+        acq.stop()
+        run.join(timeout=10)
+        assert not run.is_alive() and acq.error is None and acq.samples == 0
+    finally:
+        os.close(master)
+        os.close(slave)
 
 
 def test_kill_9_then_recover_loses_at_most_one_second(tmp_path):
