@@ -124,11 +124,12 @@ def transients(error: np.ndarray, window: int, longest: int, ratio: float = 8.0,
     a single window's spike is not a blow; the spikes of 9-12 x that the band-pass's edge made at block
     ends, before the detector's predictions ran on past them, fell to 17-25 % in the next window on
     independent seeds 59 and 70, where blows keep 64-95 %) and it ends where the error is back below
-    twice the median, within ``longest`` samples (or it fades, to below half its peak, before the record
-    ends). An effect that sets in and stays (impacts from some amplitude on) is not a transient, and
-    neither is a burst where the measured ``excitation`` (n,) bursts too (a recorded hammer hit the
-    baseline answers wrongly): its window RMS, in the burst's first window or the one on either side,
-    above three times its median over the 20 windows before."""
+    twice the median, within ``longest`` samples, or, where it has faded to below half its peak by then (a
+    lightly damped mode's free decay), ``longest`` samples on (or it fades so before the record ends).
+    An effect that sets in and stays (impacts from some amplitude on) is not a transient, and neither is
+    a burst where the measured ``excitation`` (n,) bursts too (a recorded hammer hit the baseline answers
+    wrongly): its window RMS, in the burst's first window or the one on either side, above three times
+    its median over the 20 windows before."""
     e = np.asarray(error, float)
     n = e.shape[0] // window
     if n < 5:
@@ -151,12 +152,19 @@ def transients(error: np.ndarray, window: int, longest: int, ratio: float = 8.0,
         below = np.flatnonzero(w[i + 1:i + 1 + span] < 2 * before)
         stop = i + 1 + int(below[0]) if below.size else None
         tail = w[i:min(n, i + 1 + span)]
-        if stop is None and i + span < n:  # still high after the longest a transient lasts: not one
-            i += 1
-            continue
+        fading = float(np.median(tail[-3:])) < 0.5 * float(tail.max())
+        if stop is None and i + span < n:
+            # still high after the longest a transient lasts: a lightly damped mode's free decay if it has
+            # fallen to below half its peak by then (a steel beam at 0.2 % damping loses a factor e in
+            # 80 periods; ``longest`` is two blocks, 40-60 periods of the slowest mode on the benchmark); an effect that sets in and stays is not one.
+            # Independent seeds 0-99 (1-4.4 % damping) have no such blow: no verdict moved
+            if not fading:
+                i += 1
+                continue
+            stop = i + 1 + span
         if stop is None:  # the record ends inside the burst: a transient if it is fading
             stop = n
-            if float(np.median(tail[-3:])) >= 0.5 * float(tail.max()):
+            if not fading:
                 break
         driven = x is not None and x[max(0, i - 1):i + 2].max() > 3 * float(np.median(x[max(0, i - 20):i]))
         if w[i] >= 0.5 * float(w[i:stop].max()) and (i + 1 >= n or w[i + 1] >= 0.4 * w[i]) and not driven:
