@@ -306,11 +306,11 @@ def test_modal_fit_recovers_a_chains_analytic_modes():
 
 
 def test_a_hammer_record_that_starts_at_the_hit_gives_every_mode():
-    # the chain (damping 0.19-0.46 %) hit 5-10 ms into a 20-s record, the force channel zero after the hit
-    # (as a quantised force sensor reads it), 0.1 % noise on the responses: the hit lies inside the
-    # band-pass's edge, before the first row the fit uses. With the starting FRF taken over those rows the
-    # fit found two modes of three (no input there); over the whole record, all three at their analytic
-    # frequencies and damping ratios
+    # the chain (damping 0.19-0.46 %) hit 5 and 10 ms into a 20-s record (two samples), the force channel
+    # zero after the hit (as a quantised force sensor reads it), 0.1 % noise on the responses: the hit lies
+    # inside the band-pass's edge, before the first row the fit uses. With the starting FRF taken over those
+    # rows the fit found two modes of three (no input there); over the whole record, all three at their
+    # analytic frequencies and damping ratios
     model = _chain(c=0.5)
     fs = 200.0
     F = np.zeros(4000)

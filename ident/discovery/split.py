@@ -155,9 +155,10 @@ def transients(error: np.ndarray, window: int, longest: int, ratio: float = 8.0,
         fading = float(np.median(tail[-3:])) < 0.5 * float(tail.max())
         if stop is None and i + span < n:
             # still high after the longest a transient lasts: a lightly damped mode's free decay if it has
-            # fallen to below half its peak by then (a steel beam at 0.2 % damping loses a factor e in
-            # 80 periods; ``longest`` is two blocks, 40-60 periods of the slowest mode on the benchmark); an effect that sets in and stays is not one.
-            # Independent seeds 0-99 (1-4.4 % damping) have no such blow: no verdict moved
+            # fallen to below half its peak by then (a steel beam at 0.2 % damping loses a factor e in 80
+            # periods; ``longest`` is two blocks, 40-60 periods of the slowest mode on the benchmark); an
+            # effect that sets in and stays is not one. Independent seeds 0-99 (1-4.4 % damping) have no
+            # such blow: no verdict moved
             if not fading:
                 i += 1
                 continue
