@@ -331,7 +331,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     scale = np.maximum(prep.measured[test_rows].std(axis=0), 1e-300)
     piece = max(16, int(PIECE_PERIODS * prep.fs_hz / f_min))
     e0, n0 = block_errors(baseline, baseline.model, prep, split.test, warm, scale, (), bound, piece)
-    sc = Scoring(scale, e0, n0, warm, bound, piece)
+    sc = Scoring(scale, e0, n0, warm, bound, piece, settings.gain_floor)
     kind = "rig model" if rig is not None else "modal model"
     k = len(baseline.model.frequencies_hz)
     say(f"baseline: {kind} with {k} mode{'' if k == 1 else 's'}, band {prep.band[0]:.3g}-"

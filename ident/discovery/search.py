@@ -47,6 +47,9 @@ from .split import Split, rows_of
 
 MIN_RANK_PIECES = 5  # fewer pieces than this: the signed-rank test's p hangs on the count alone, the t-test decides
 PENALTY = 1e9  # the refinement's objective where a simulation diverges or a parameter leaves its range
+# a candidate that gains nothing over its own linear part on held-out blocks still may be a finding if over the
+# training blocks it cuts that linear part's error by this share (``_own_gain_trained``): the cause acts there
+ACTS_IN_TRAINING = 0.5
 NUDGE_RATE = 0.3  # relaxation rate of the warm-up towards measured velocities, per rad/s of the slowest mode
 
 
@@ -81,6 +84,7 @@ class Candidate:
     gain: float = float("nan")  # 1 - test NRMSE / baseline test NRMSE
     p_value: float = float("nan")  # paired test against the baseline
     own_gain: float = float("nan")  # 1 - test NRMSE / that of its own linear part alone (refitted with it)
+    own_gain_trained: float = float("nan")  # the same over the training blocks (``score``: where it is asked)
     refined: bool = False
     baseline: Baseline | None = None  # its own linear part when refitted jointly
     note: str = ""
@@ -155,6 +159,7 @@ class Scoring:
     warm: int
     bound: float
     piece: int  # samples per piece of the paired test
+    floor: float = 0.03  # the gain floor (``Settings.gain_floor``): below it the training blocks are asked too
 
 
 def simulation_bound(prep: Prepared) -> float:
@@ -257,7 +262,7 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
     # computed only for a candidate that gains at all: one that does not beat the baseline is no finding
     # whatever its own gain (``significant``: gain above a floor >= 0), and the check costs a second
     # simulation of every held-out block
-    own_gain = float("nan")
+    own_gain = own_trained = float("nan")
     comp = compensation(c)
     if (c.baseline is not None or comp) and c.elements and gain > 0:
         try:
@@ -266,6 +271,8 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
         except NUMERIC_FAILURES:
             alone = np.inf
         own_gain = 1.0 - nrmse / alone if np.isfinite(alone) and alone > 0 else 1.0
+        if own_gain <= sc.floor:
+            own_trained = _own_gain_trained(c, own, comp, prep, split, sc)
     p_value = signed_rank_p(sc.block_errors, errs)
     if CAUSES[c.cause].read_off_record and np.isfinite(nrmse):
         # a cause whose parameters are read off the record (a clipping's range: its extreme) is fitted on
@@ -280,7 +287,34 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
             p_value = signed_rank_p(base_all, mine_all)
         except NUMERIC_FAILURES:
             pass
-    return replace(c, block_errors=errs, test_nrmse=nrmse, gain=gain, p_value=p_value, own_gain=own_gain)
+    return replace(c, block_errors=errs, test_nrmse=nrmse, gain=gain, p_value=p_value, own_gain=own_gain,
+                   own_gain_trained=own_trained)
+
+
+def _own_gain_trained(c: Candidate, own: Baseline, comp: tuple, prep: Prepared, split: Split, sc: Scoring) -> float:
+    """1 - the candidate's simulation error over the training blocks / its own linear part's alone there.
+
+    Asked where the held-out blocks show no gain over that linear part (``own_gain`` below the floor): a
+    cause that acts in a few blocks, all of them training blocks, leaves the held-out ones to its linear
+    part alone, which it made right. Independent seed 140, a hardening Duffing oscillator under a
+    stepped sine that jumps in training blocks 5 and 6 (0 to 19): the modal baseline fitted through the
+    jump (36.4 Hz, 3.3 % damping) holds out 0.78; refitted with the cubic, 33.40 Hz and 1.9 % (the
+    generator's 33.39 Hz and 1.8 %), k3 within 4 %, held-out gain 0.82 over the baseline and none over
+    that linear part alone; over the training blocks the linear part alone has 4.5 times the cubic's
+    error (10.5 against 0.4 in the jump's blocks). It is in-sample: the linear part was fitted with the
+    force in place, so without it does worse there by construction, and ``ACTS_IN_TRAINING`` asks much
+    more than the floor (every other candidate asked on seeds 0-35 had at most 1.37 times, a share of 0.27;
+    on seeds 0-99 no verdict moved)."""
+    try:
+        _, with_it = block_errors(own, own.model.with_elements(c.elements), prep, split.train, sc.warm, sc.scale,
+                                  c.output, sc.bound)
+        _, alone = block_errors(own, own.model.with_elements(comp), prep, split.train, sc.warm, sc.scale, (),
+                                sc.bound)
+    except NUMERIC_FAILURES:
+        return float("nan")
+    if not (np.isfinite(with_it) and np.isfinite(alone) and alone > 0):
+        return float("nan")
+    return 1.0 - with_it / alone
 
 
 # --- regression ---------------------------------------------------------------------------------------
@@ -828,7 +862,8 @@ class Selection:
 
 def significant(c: Candidate, settings: Settings) -> bool:
     """Does a scored candidate beat the baseline: below predicting zero, by more than the gain floor, by
-    the paired test, and by more than the gain floor over its own linear part alone (``score``)?
+    the paired test, and by more than the gain floor over its own linear part alone (``score``), or, where
+    it does not on held-out blocks, by ``ACTS_IN_TRAINING`` over the training blocks (``_own_gain_trained``)?
 
     A compensated candidate (``regressions``) must also gain more over its own spring and damper than the
     whole of it gains over the baseline: ``own_gain < gain`` is the same as "the spring and the damper
@@ -840,7 +875,8 @@ def significant(c: Candidate, settings: Settings) -> bool:
     (the softening family's seed 17, nothing hidden: the spring and damper alone 0.0512 against the
     baseline's 0.0549, a Coulomb friction on top 0.0485, named at p = 6e-39 before this rule)."""
     return (np.isfinite(c.test_nrmse) and c.test_nrmse < 1.0 and c.gain > settings.gain_floor
-            and not c.own_gain <= settings.gain_floor and c.p_value < settings.alpha
+            and not (c.own_gain <= settings.gain_floor and not c.own_gain_trained >= ACTS_IN_TRAINING)
+            and c.p_value < settings.alpha
             and not (compensation(c) and c.own_gain < c.gain))
 
 
