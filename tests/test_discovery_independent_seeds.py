@@ -145,7 +145,9 @@ def test_a_hardening_hammer_decay_on_one_sensor_gets_one_mode_and_its_cubic():
     f0 = eq["natural_frequency_hz"]
     assert abs(pole) / (2 * np.pi) == pytest.approx(f0, rel=0.005)
     assert -pole.real / abs(pole) == pytest.approx(eq["damping_ratio"], rel=0.10)
-    assert f.gain > 0.9 and f.own_gain > 0.5
+    # 0.77 over a baseline no longer driven by the force channel's noise between hits (0.94 before the force
+    # window, stop 67)
+    assert f.gain > 0.7 and f.own_gain > 0.5
     # the record's own backbone (the frequency at the first mode's amplitude A over the decay,
     # f = f0 (1 + 3/8 k3 A^2 / w0^2), read off the analytic signal of the band-passed velocity) is the
     # generator's one-mode equivalent (6.65e11 against 6.67e11 per kg); the coefficient found is 7.22e11
