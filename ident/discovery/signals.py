@@ -118,7 +118,7 @@ def impulsive(u: np.ndarray) -> bool:
 
 def force_window(u: np.ndarray, fs_hz: float, pad_s: float = 0.002) -> np.ndarray:
     """A hammer record's force with what its channel reads between the hits set to the quiet level (the
-    median): the force window of modal testing (Ewins, "Modal Testing", 2000, 3.11). Between hits the
+    median): the force window of impact testing (Ewins, "Modal Testing", 2000). Between hits the
     channel reads its sensor's noise, not a force: driven by it, a model moves where the structure does
     not (independent seed 101, a clamped-clamped beam: 7.3 s of a force channel's noise after the hit
     drove the baseline to ten times the response measured there). A hit is where the force stands
