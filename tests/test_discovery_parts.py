@@ -305,20 +305,30 @@ def test_modal_fit_recovers_a_chains_analytic_modes():
     assert err < 1e-3
 
 
+def _hit_chain(response_noise: float = 0.0, force_noise: float = 0.0):
+    """The chain (damping 0.19-0.46 %) hit at 5 and 10 ms of a 20 s record at 200 Hz (two samples of 50 N):
+    the model, the force channel as read (with ``force_noise`` N of noise), the clean accelerations, and the
+    record prepared with ``response_noise`` of each response's spread added."""
+    model = _chain(c=0.5)
+    fs = 200.0
+    F = np.zeros(4000)
+    F[1:3] = 50.0
+    acc = simulate(model, F, fs, [(0, 2), (1, 2), (2, 2)])
+    rng = np.random.default_rng(0)
+    read = F + force_noise * rng.standard_normal(F.size)
+    noisy = acc + response_noise * acc.std(axis=0) * rng.standard_normal(acc.shape)
+    prep = prepare(Measurement(fs, Channel("F", "force", read),
+                               tuple(Channel(f"x{i + 1}", "acceleration", noisy[:, i]) for i in range(3))))
+    return model, read, acc, prep
+
+
 def test_a_hammer_record_that_starts_at_the_hit_gives_every_mode():
     # the chain (damping 0.19-0.46 %) hit 5 and 10 ms into a 20-s record (two samples), the force channel
     # zero after the hit (as a quantised force sensor reads it), 0.1 % noise on the responses: the hit lies
     # inside the band-pass's edge, before the first row the fit uses. With the starting FRF taken over those
     # rows the fit found two modes of three (no input there); over the whole record, all three at their
     # analytic frequencies and damping ratios
-    model = _chain(c=0.5)
-    fs = 200.0
-    F = np.zeros(4000)
-    F[1:3] = 50.0
-    acc = simulate(model, F, fs, [(0, 2), (1, 2), (2, 2)])
-    acc = acc + 1e-3 * acc.std(axis=0) * np.random.default_rng(0).standard_normal(acc.shape)
-    prep = prepare(Measurement(fs, Channel("F", "force", F), tuple(Channel(f"x{i + 1}", "acceleration", acc[:, i])
-                                                                   for i in range(3))))
+    model, _, _, prep = _hit_chain(response_noise=1e-3)
     assert prep.transient and prep.edge > 2
     fitted, _ = fit_model(prep, np.arange(prep.edge, prep.n - prep.edge))
     assert fitted.poles.size == 3
@@ -331,36 +341,26 @@ def test_a_hammer_records_drive_is_nil_between_hits():
     # its zero the channel's quiet level. With the record's mean and trend taken out (as from a steady
     # excitation) the hit had left a force of up to 1.3e-3 of the drive's peak over the rest of the record,
     # and a simulation started 10 s in met it as a step: a forced response 2.5 % of the record's RMS there
-    model = _chain(c=0.5)
-    fs = 200.0
-    F = np.zeros(4000)
-    F[1:3] = 50.0
-    acc = simulate(model, F, fs, [(0, 2), (1, 2), (2, 2)])
-    prep = prepare(Measurement(fs, Channel("F", "force", F), tuple(Channel(f"x{i + 1}", "acceleration", acc[:, i])
-                                                                   for i in range(3))))
+    model, _, acc, prep = _hit_chain()
+    fs, outputs = prep.fs_hz, [(0, 2), (1, 2), (2, 2)]
     assert prep.transient
     peak = np.abs(prep.drive).max()
     assert np.abs(prep.drive[1000:]).max() < 1e-9 * peak  # the low-pass's tail alone (3.5e-10 at 5 s)
-    late = simulate(model, prep.drive[2000:], fs, [(0, 2), (1, 2), (2, 2)])
+    late = simulate(model, prep.drive[2000:], fs, outputs)
     assert np.abs(late).max() < 1e-6 * np.abs(acc[2000:]).max()
     # the record's own response, simulated from rest with the drive, is the measured one in the band
-    y = convert(simulate(model, prep.drive, fs, [(0, 2), (1, 2), (2, 2)]), fs, prep.band, 2, 2)
+    y = convert(simulate(model, prep.drive, fs, outputs), fs, prep.band, 2, 2)
     rows = slice(prep.edge, prep.n - prep.edge)
-    assert np.all(np.sqrt(np.mean((y[rows] - prep.measured[rows]) ** 2, axis=0)) < 3e-3 * prep.measured[rows].std(axis=0))
+    err = np.sqrt(np.mean((y[rows] - prep.measured[rows]) ** 2, axis=0))
+    assert np.all(err < 3e-3 * prep.measured[rows].std(axis=0))
 
 
 def test_a_hammer_channels_noise_between_hits_is_no_force():
     # the force window of modal testing: the chain hit at 5 and 10 ms, the force channel reading 0.1 % of
     # the hit's peak of noise throughout (a sensor's, not a force). The drive keeps the hit and reads nil
     # after it; driven by the noise, the chain had moved at 12 % of its own response's spread 10 s later
-    model = _chain(c=0.5)
-    fs = 200.0
-    F = np.zeros(4000)
-    F[1:3] = 50.0
-    acc = simulate(model, F, fs, [(0, 2), (1, 2), (2, 2)])
-    read = F + 0.05 * np.random.default_rng(3).standard_normal(F.size)
-    prep = prepare(Measurement(fs, Channel("F", "force", read), tuple(Channel(f"x{i + 1}", "acceleration", acc[:, i])
-                                                                      for i in range(3))))
+    model, read, acc, prep = _hit_chain(force_noise=0.05)
+    fs = prep.fs_hz
     assert prep.transient
     kept = force_window(read, fs)
     assert np.array_equal(kept[1:3], read[1:3]) and np.all(kept[10:] == np.median(read))
