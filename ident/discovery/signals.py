@@ -125,12 +125,35 @@ def force_window(u: np.ndarray, fs_hz: float, pad_s: float = 0.002) -> np.ndarra
     above eight times the channel's noise (its median absolute deviation) and 1 % of the largest hit,
     widened by ``pad_s`` on each side."""
     u = np.asarray(u, float)
-    x = u - np.median(u)
-    noise = 1.4826 * float(np.median(np.abs(x)))
-    hit = np.abs(x) > max(8.0 * noise, 0.01 * float(np.max(np.abs(x))))
     w = max(1, int(round(pad_s * fs_hz)))
-    near = np.convolve(hit.astype(float), np.ones(2 * w + 1), mode="same") > 0
+    near = np.convolve(hits(u).astype(float), np.ones(2 * w + 1), mode="same") > 0
     return np.where(near, u, float(np.median(u)))
+
+
+def hits(u: np.ndarray) -> np.ndarray:
+    """Where a hammer's force channel stands above eight times its noise (the median absolute deviation
+    from its quiet level, the median) and 1 % of the largest hit: the samples of its hits."""
+    x = np.asarray(u, float) - np.median(u)
+    noise = 1.4826 * float(np.median(np.abs(x)))
+    return np.abs(x) > max(8.0 * noise, 0.01 * float(np.max(np.abs(x))))
+
+
+def rest_until(u: np.ndarray, Y: np.ndarray, quiet: float = 0.05) -> int | None:
+    """A hammer record that starts at rest: the sample of its first hit, when before it every response
+    (n, k) stays within ``quiet`` of its largest swing about its median; else None. Before such a
+    record the structure was still: the record has no initial state, and the band-pass, which treats
+    the record as preceded by nothing, is exact from its first sample on. A modal model's input gain is
+    then fixed by the hit (``baselines.modal.Columns``); with an initial state fitted as well, the hit's
+    forced response after it, a free decay, is one the initial state's free response fits as well."""
+    at = np.flatnonzero(hits(u))
+    if not at.size:
+        return None
+    first = int(at[0])
+    Y = np.asarray(Y, float).reshape(len(u), -1)
+    swing = np.abs(Y - np.median(Y, axis=0))
+    if first and np.any(swing[:first].max(axis=0) > quiet * swing.max(axis=0)):
+        return None
+    return first
 
 
 def frf(u: np.ndarray, Y: np.ndarray, fs_hz: float, nperseg: int | None = None
@@ -314,6 +337,11 @@ class Prepared:
     excitation_kind: str = "force"
     transient: bool = False  # a hammer-hit record
     blows: tuple[int, ...] = ()  # samples where unmodelled blows strike: free responses start there
+    rest_until: int | None = None  # a hammer record that starts at rest: its first hit (``rest_until``)
+    # of such a record, the force band-passed with its stillness before it: ``edge`` samples before sample
+    # 0, then the record's. The zero-phase filter spreads the hit backwards, and what it spreads before the
+    # record drives the modes as the record starts (``baselines.modal.Columns``)
+    u_at_rest: np.ndarray | None = None
     start_s: float = 0.0  # the record's time at sample 0 (``Measurement.start_s``)
 
     @property
@@ -413,9 +441,17 @@ def prepare(m: Measurement, band: tuple[float, float] | None = None) -> Prepared
         for order in range(3):
             zva[order, :, i] = convert(y, fs, band, o, order) - base[:, order]
     transient = impulsive(u_raw)
+    still = None
     if transient:
+        still = rest_until(u_raw, np.column_stack([np.asarray(c.values, float) for c in m.responses]))
         u_raw = force_window(u_raw, fs)
     u = convert(u_raw, fs, band, 0, 0)
+    at_rest = None
+    if still is not None:
+        # before the record the force read its quiet level: band-passed with that stillness in front, the
+        # force's start is exact and its spread before the record is known
+        quiet = float(np.median(u_raw))
+        at_rest = convert(np.concatenate([np.full(edge, quiet), u_raw]) - quiet, fs, band, 0, 0, detrend=False)
     if transient:
         # a hammer's force is nil between its hits: its zero is the channel's quiet level (the median), and
         # no mean or trend is taken out, which would spread the hits over the record as a steady force (a
@@ -426,7 +462,8 @@ def prepare(m: Measurement, band: tuple[float, float] | None = None) -> Prepared
     else:
         drive = convert(u_raw, fs, (0.0, 0.45 * fs), 0, 0)
     return Prepared(fs, m.names, [c.kind for c in m.responses], u, drive, base, zva, measured, band, edge, signs,
-                    notes, driving, m.excitation.kind, transient, start_s=m.start_s)
+                    notes, driving, m.excitation.kind, transient, rest_until=still, u_at_rest=at_rest,
+                    start_s=m.start_s)
 
 
 # --- records over the memory budget -------------------------------------------------------------------
