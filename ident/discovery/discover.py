@@ -23,7 +23,7 @@ from threadpoolctl import threadpool_limits
 from ..rig import RigParams
 from .backbone import CLEAR, free_decay
 from .baselines import Baseline
-from .baselines.modal import ModalBaseline, check_errors, drivable, structural
+from .baselines.modal import ModalBaseline, check_errors, drivable, gliding, structural
 from .baselines.rig import RigBaseline
 from .catalogue import CAUSES, describing_stiffness
 from .characterise import characterise
@@ -112,7 +112,12 @@ def _fit_in_band(prep: Prepared, split: Split, poles0: np.ndarray) -> ModalBasel
         try:
             searched = ModalBaseline.fit(prep, rows, check=at).model.poles
             mine, theirs = check_errors(searched, prep, rows, at), check_errors(poles0, prep, rows, at)
-            if np.all(mine < 1.0) and mine.sum() < 0.9 * theirs.sum():
+            # nor a one-response fit that is one mode gliding, as the order's choice holds it (``gliding``):
+            # a refinement after that choice can make such a pair (independent seed 93, a clamped-clamped
+            # beam's hardening hammer decay: 167.2 Hz undamped, 168.6 and 169.5 Hz where the first fit had the
+            # beam's mode, 166.4 Hz; the undamped line rang on through the record's quiet tail, and the
+            # baseline held out 1.9 times worse than predicting zero)
+            if np.all(mine < 1.0) and mine.sum() < 0.9 * theirs.sum() and not gliding(searched, prep):
                 poles0 = searched
         except NUMERIC_FAILURES:
             pass

@@ -38,11 +38,11 @@ RESOLVED = 1.0  # decay rate times record length below which a pole is a sinusoi
 
 
 def _design(poles, states, drive, t, order: int, starts=(), initial: bool = True) -> np.ndarray:
-    """Real design matrix (n, 4m + 2m len(starts)) of one output of kinematic ``order``: columns for
-    Re C, Im C (forced response, with the feedthrough of the modal input ``drive`` (n, m)), for the free
-    response of the record's initial state (unless not ``initial``: a record that starts at rest has
-    none), and for the free response from each of ``starts`` (s) on: an unmeasured blow leaves the
-    structure with a modal state nobody measured, which decays like any."""
+    """Real design matrix (n, 4m + 2m len(starts), 2m fewer without ``initial``) of one output of
+    kinematic ``order``: columns for Re C, Im C (forced response, with the feedthrough of the modal input
+    ``drive`` (n, m)), for the free response of the record's initial state (unless not ``initial``: a
+    record that starts at rest has none), and for the free response from each of ``starts`` (s) on: an
+    unmeasured blow leaves the structure with a modal state nobody measured, which decays like any."""
     lam = poles[None, :]
     forced = lam**order * states
     if order >= 1:
@@ -425,6 +425,13 @@ def peak_poles(f_hz: np.ndarray, H: np.ndarray, n_modes: int, zeta: float = 0.02
     return -zeta * w + 1j * w
 
 
+def gliding(poles: np.ndarray, prep: Prepared) -> bool:
+    """Does a one-response fit hold two resonant modes that are an unresolved pair (``_unresolved_pair``):
+    one mode gliding with amplitude?"""
+    poles = np.asarray(poles, complex)
+    return len(prep.names) == 1 and _unresolved_pair(poles[structural(poles, prep)], prep.fs_hz / prep.n)
+
+
 def _unresolved_pair(poles: np.ndarray, resolution_hz: float) -> bool:
     """Are two of the modes closer in frequency than their half-power bandwidths and the record's
     frequency resolution add up to? One response cannot tell such a pair from one mode whose frequency
@@ -509,7 +516,7 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
         # with one response, two modes closer than their bandwidths are one mode gliding with amplitude
         # (independent seed 64, a clamped-clamped beam's hardening hammer decay: 192.6 and 195.1 Hz where
         # the beam has one mode at 185.8 Hz, and the cubic then lost to a quadratic stiffness)
-        if len(prep.names) == 1 and _unresolved_pair(poles[resonant], prep.fs_hz / prep.n):
+        if gliding(poles, prep):
             misses += 1
             if misses == 2:
                 break
