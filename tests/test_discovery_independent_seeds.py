@@ -18,9 +18,8 @@ from threadpoolctl import threadpool_limits
 
 from daq.sim.independent.cases import discovery_case
 from ident.cli.bench_discovery import independent_case, judge
-from ident.discovery import discover
+from ident.discovery import discover, search
 from ident.discovery.baselines.modal import ZETA_MAX, ModalBaseline, bounded
-from ident.discovery import search
 from ident.discovery.search import block_errors, compensation, simulation_bound
 from ident.discovery.signals import prepare
 from ident.discovery.split import Split
