@@ -215,6 +215,23 @@ def test_a_band_search_that_splits_a_gliding_decays_mode_is_not_taken():
     assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(eq["k3_per_mass"], rel=0.1)
 
 
+def test_a_gliding_pair_in_the_first_fit_leaves_its_lighter_mode():
+    # independent seed 41: a clamped-clamped beam (184.9 Hz, 0.35 %) hit by a hammer, one velocity sensor.
+    # The first fit's last refinement made the beam's mode a pair, 185.5 Hz at 1.08 % (the decay's loud,
+    # fast-fading start) and 184.9 Hz at 0.34 % (its tail); both went on to the band's fit, which kept a pair,
+    # and the cubic's coefficient came out 90 % off. The lighter of a gliding pair is the mode at small
+    # amplitude: with it alone the baseline's mode is within 1 % and the coefficient within 10 % (4.5 %)
+    generated = discovery_case(41)
+    c = independent_case(41, generated)
+    eq = generated.truth["equivalent"]
+    d = discover(c.measurement)
+    f = np.sort(d.baseline.model.frequencies_hz)
+    assert f.size == 2 and f[0] == pytest.approx(eq["natural_frequency_hz"], rel=0.01)  # and 511.8 Hz
+    v = judge(c, d, 0.0)
+    assert v.right and v.extra == 0, d.verdict()
+    assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(eq["k3_per_mass"], rel=0.1)
+
+
 def test_a_weaker_hardening_decay_gets_its_cubic_and_its_coefficient():
     # independent seed 66: a clamped-clamped beam hit by a hammer, one velocity sensor, 0.78 % damping:
     # the cubic leads (held-out gain 0.94) a quadratic stiffness (0.82) by more than the paired test's

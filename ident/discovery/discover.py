@@ -23,7 +23,7 @@ from threadpoolctl import threadpool_limits
 from ..rig import RigParams
 from .backbone import CLEAR, free_decay
 from .baselines import Baseline
-from .baselines.modal import ModalBaseline, check_errors, drivable, gliding, structural
+from .baselines.modal import ModalBaseline, check_errors, drivable, glide_partners, gliding, structural
 from .baselines.rig import RigBaseline
 from .catalogue import CAUSES, describing_stiffness
 from .characterise import characterise
@@ -71,6 +71,7 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
     # the rig's first mode is 7.3 Hz), not a mode
     light = drivable(first.model.poles, prep0)
     light = light if np.any(light) else structural(first.model.poles, prep0)
+    light &= ~glide_partners(first.model.poles, prep0)
     if not np.any(light):
         raise ValueError("no lightly damped mode in the data: nothing resonates in the band "
                          f"{prep0.band[0]:.3g}-{prep0.band[1]:.3g} Hz")

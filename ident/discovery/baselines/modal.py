@@ -432,6 +432,24 @@ def gliding(poles: np.ndarray, prep: Prepared) -> bool:
     return len(prep.names) == 1 and _unresolved_pair(poles[structural(poles, prep)], prep.fs_hz / prep.n)
 
 
+def glide_partners(poles: np.ndarray, prep: Prepared) -> np.ndarray:
+    """Of a one-response fit's resonant poles, those that make an unresolved pair with a more lightly damped
+    one (``gliding``): the pair is one mode gliding with amplitude, and the lighter is the mode at small
+    amplitude, the linear part (the other follows the loud start of the decay, which fades faster)."""
+    poles = np.asarray(poles, complex)
+    out = np.zeros(poles.size, bool)
+    if len(prep.names) != 1:
+        return out
+    res = prep.fs_hz / prep.n
+    f, z = np.abs(poles) / (2 * np.pi), -poles.real / np.maximum(np.abs(poles), 1e-300)
+    idx = np.flatnonzero(structural(poles, prep))
+    for i in idx:
+        for j in idx:
+            if i != j and abs(f[i] - f[j]) < z[i] * f[i] + z[j] * f[j] + res and z[j] < z[i]:
+                out[i] = True
+    return out
+
+
 def _unresolved_pair(poles: np.ndarray, resolution_hz: float) -> bool:
     """Are two of the modes closer in frequency than their half-power bandwidths and the record's
     frequency resolution add up to? One response cannot tell such a pair from one mode whose frequency
