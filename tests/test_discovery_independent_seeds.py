@@ -116,16 +116,10 @@ def test_a_hammer_record_that_starts_at_the_hit_gets_a_baseline_and_its_cubic():
     # predicting zero and nothing was found. The coefficient was 8.7 % off; since the record's input gain is
     # fitted with the record at rest before its hit (stop 68), its first block is simulated through the hit,
     # the loudest part of the decay, and it is 16.7 % off (the target is 10 %)
-    generated = discovery_case(197)
-    c = independent_case(197, generated)
-    eq = generated.truth["equivalent"]
-    d = discover(c.measurement)
+    d, eq = _cubic_found(197, rel=0.2)  # 16.7 %
     assert d.prep.transient and d.baseline_test_nrmse < 0.3  # 0.17
     (pole,) = d.baseline.model.poles
     assert abs(pole) / (2 * np.pi) == pytest.approx(eq["natural_frequency_hz"], rel=0.02)
-    v = judge(c, d, 0.0)
-    assert v.right and v.extra == 0, d.verdict()
-    assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(eq["k3_per_mass"], rel=0.2)  # 16.7 %
 
 
 def test_a_hammer_record_at_rest_gets_its_input_gain_from_the_hit_and_its_cubic():
@@ -135,18 +129,12 @@ def test_a_hammer_record_at_rest_gets_its_input_gain_from_the_hit_and_its_cubic(
     # 268 times the measured response and nothing was found. The record is still before its hit, so it has
     # no initial state: that block 0.91 times (the linear part under a hardening decay), the cubic found,
     # its coefficient 9.1 % off the generator's one-mode equivalent
-    generated = discovery_case(12, "cc_beam")
-    c = independent_case(12, generated)
-    d = discover(c.measurement)
+    d, _ = _cubic_found(12, rel=0.15, family="cc_beam")
     assert d.prep.rest_until is not None
     first = d.split.blocks[0]
     y = search.predict(d.baseline, d.baseline.model, d.prep, first, d.warm)
     ratio = np.sqrt(np.mean(y**2)) / np.sqrt(np.mean(d.prep.measured[first] ** 2))
     assert 0.7 < ratio < 1.3
-    v = judge(c, d, 0.0)
-    assert v.right and v.extra == 0, d.verdict()
-    assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(
-        generated.truth["equivalent"]["k3_per_mass"], rel=0.15)
 
 
 def test_a_hardening_hammer_decay_on_one_sensor_gets_one_mode_and_its_cubic():
@@ -185,16 +173,10 @@ def test_a_gliding_decays_baseline_keeps_the_mode_its_first_fit_resolved():
     # the beam's mode (185.96 Hz at 0.229 %; the beam's 185.84 Hz at 0.229 %); refined on the training
     # blocks' glide (195 -> 186 Hz) it went to 191.5 Hz at zeta 5e-27, a sinusoid the record cannot resolve,
     # the baseline held out 11.5 times worse than predicting zero and a stopper was named (gain 0.96)
-    generated = discovery_case(64)
-    c = independent_case(64, generated)
-    eq = generated.truth["equivalent"]
-    d = discover(c.measurement)
+    d, eq = _cubic_found(64, rel=0.15)  # 7.8 %
     (pole,) = d.baseline.model.poles
     assert abs(pole) / (2 * np.pi) == pytest.approx(eq["natural_frequency_hz"], rel=0.005)
     assert -pole.real / abs(pole) == pytest.approx(eq["damping_ratio"], rel=0.10)
-    v = judge(c, d, 0.0)
-    assert v.right and v.extra == 0, d.verdict()
-    assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(eq["k3_per_mass"], rel=0.15)  # 7.8 %
 
 
 def test_a_band_search_that_splits_a_gliding_decays_mode_is_not_taken():
@@ -203,16 +185,10 @@ def test_a_band_search_that_splits_a_gliding_decays_mode_is_not_taken():
     # undamped beside 168.6 and 169.5 Hz, one gliding mode split in three, and was taken: the undamped line
     # rang on through the record's quiet tail, the baseline held out 1.9 times worse than predicting zero,
     # and nothing was found. Not taken, the baseline is the beam's mode and its cubic is found (0.6 % off)
-    generated = discovery_case(93)
-    c = independent_case(93, generated)
-    eq = generated.truth["equivalent"]
-    d = discover(c.measurement)
+    d, eq = _cubic_found(93, rel=0.1)
     (pole,) = d.baseline.model.poles
     assert abs(pole) / (2 * np.pi) == pytest.approx(eq["natural_frequency_hz"], rel=0.005)
     assert d.baseline_test_nrmse < 1.0
-    v = judge(c, d, 0.0)
-    assert v.right and v.extra == 0, d.verdict()
-    assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(eq["k3_per_mass"], rel=0.1)
 
 
 def test_a_gliding_pair_in_the_first_fit_leaves_its_lighter_mode():
@@ -221,15 +197,9 @@ def test_a_gliding_pair_in_the_first_fit_leaves_its_lighter_mode():
     # fast-fading start) and 184.9 Hz at 0.34 % (its tail); both went on to the band's fit, which kept a pair,
     # and the cubic's coefficient came out 90 % off. The lighter of a gliding pair is the mode at small
     # amplitude: with it alone the baseline's mode is within 1 % and the coefficient within 10 % (4.5 %)
-    generated = discovery_case(41)
-    c = independent_case(41, generated)
-    eq = generated.truth["equivalent"]
-    d = discover(c.measurement)
+    d, eq = _cubic_found(41, rel=0.1)
     f = np.sort(d.baseline.model.frequencies_hz)
     assert f.size == 2 and f[0] == pytest.approx(eq["natural_frequency_hz"], rel=0.01)  # and 511.8 Hz
-    v = judge(c, d, 0.0)
-    assert v.right and v.extra == 0, d.verdict()
-    assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(eq["k3_per_mass"], rel=0.1)
 
 
 def test_a_weaker_hardening_decay_gets_its_cubic_and_its_coefficient():
@@ -247,6 +217,20 @@ def test_a_weaker_hardening_decay_gets_its_cubic_and_its_coefficient():
                                                                  rel=0.15)
     quadratic = [x for x in d.candidates if x.cause == "quadratic_stiffness"]
     assert quadratic and max(x.gain for x in quadratic) < f.gain
+
+
+def _cubic_found(seed: int, rel: float, family: str | None = None):
+    """Discovery on the generator's case ``seed`` (of ``family``, if given), asserted to name its cubic at
+    the right place with no false extra finding and its coefficient per modal mass within ``rel`` of the
+    generator's one-mode equivalent; the discovery and that equivalent."""
+    generated = discovery_case(seed, family)
+    c = independent_case(seed, generated)
+    eq = generated.truth["equivalent"]
+    d = discover(c.measurement)
+    v = judge(c, d, 0.0)
+    assert v.right and v.extra == 0, d.verdict()
+    assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(eq["k3_per_mass"], rel=rel)
+    return d, eq
 
 
 def _backbone_k3(velocity: np.ndarray, fs: float, f0: float, hit_s: float) -> float:

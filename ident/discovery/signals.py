@@ -447,18 +447,18 @@ def prepare(m: Measurement, band: tuple[float, float] | None = None) -> Prepared
         u_raw = force_window(u_raw, fs)
     u = convert(u_raw, fs, band, 0, 0)
     at_rest = None
-    if still is not None:
-        # before the record the force read its quiet level: band-passed with that stillness in front, the
-        # force's start is exact and its spread before the record is known
-        quiet = float(np.median(u_raw))
-        at_rest = convert(np.concatenate([np.full(edge, quiet), u_raw]) - quiet, fs, band, 0, 0, detrend=False)
     if transient:
         # a hammer's force is nil between its hits: its zero is the channel's quiet level (the median), and
         # no mean or trend is taken out, which would spread the hits over the record as a steady force (a
         # clamped-clamped beam hit 3 ms into its 7.5 s record, independent seed 197: a force ramping from
         # -0.05 % to +0.02 % of the hit's peak after it, switched on at each simulation's start; the baseline
         # held out 7.8 times worse than predicting zero, 0.17 without it, and its cubic is found)
-        drive = convert(u_raw - np.median(u_raw), fs, (0.0, 0.45 * fs), 0, 0, detrend=False)
+        force = u_raw - float(np.median(u_raw))
+        drive = convert(force, fs, (0.0, 0.45 * fs), 0, 0, detrend=False)
+        if still is not None:
+            # before the record the force read its quiet level: band-passed with that stillness in front,
+            # the force's start is exact and its spread before the record is known
+            at_rest = convert(np.concatenate([np.zeros(edge), force]), fs, band, 0, 0, detrend=False)
     else:
         drive = convert(u_raw, fs, (0.0, 0.45 * fs), 0, 0)
     return Prepared(fs, m.names, [c.kind for c in m.responses], u, drive, base, zva, measured, band, edge, signs,

@@ -426,40 +426,36 @@ def peak_poles(f_hz: np.ndarray, H: np.ndarray, n_modes: int, zeta: float = 0.02
 
 
 def gliding(poles: np.ndarray, prep: Prepared) -> bool:
-    """Does a one-response fit hold two resonant modes that are an unresolved pair (``_unresolved_pair``):
+    """Does a one-response fit hold two resonant modes that are an unresolved pair (``_unresolved_pairs``):
     one mode gliding with amplitude?"""
-    poles = np.asarray(poles, complex)
-    return len(prep.names) == 1 and _unresolved_pair(poles[structural(poles, prep)], prep.fs_hz / prep.n)
+    return bool(np.any(_unresolved_pairs(poles, prep)))
 
 
 def glide_partners(poles: np.ndarray, prep: Prepared) -> np.ndarray:
     """Of a one-response fit's resonant poles, those that make an unresolved pair with a more lightly damped
     one (``gliding``): the pair is one mode gliding with amplitude, and the lighter is the mode at small
     amplitude, the linear part (the other follows the loud start of the decay, which fades faster)."""
+    pairs = _unresolved_pairs(poles, prep)
+    z = _zeta(np.asarray(poles, complex))
+    return np.any(pairs & (z[None, :] < z[:, None]), axis=1)
+
+
+def _zeta(poles: np.ndarray) -> np.ndarray:
+    return -poles.real / np.maximum(np.abs(poles), 1e-300)
+
+
+def _unresolved_pairs(poles: np.ndarray, prep: Prepared) -> np.ndarray:
+    """(m, m): which two of a one-response fit's resonant modes (``structural``) are closer in frequency than
+    their half-power bandwidths and the record's frequency resolution add up to (none with more responses).
+    One response cannot tell such a pair from one mode whose frequency moves with amplitude (several sensors
+    can: the pair's shapes differ, as a rig's two beams' do)."""
     poles = np.asarray(poles, complex)
-    out = np.zeros(poles.size, bool)
     if len(prep.names) != 1:
-        return out
-    res = prep.fs_hz / prep.n
-    f, z = np.abs(poles) / (2 * np.pi), -poles.real / np.maximum(np.abs(poles), 1e-300)
-    idx = np.flatnonzero(structural(poles, prep))
-    for i in idx:
-        for j in idx:
-            if i != j and abs(f[i] - f[j]) < z[i] * f[i] + z[j] * f[j] + res and z[j] < z[i]:
-                out[i] = True
-    return out
-
-
-def _unresolved_pair(poles: np.ndarray, resolution_hz: float) -> bool:
-    """Are two of the modes closer in frequency than their half-power bandwidths and the record's
-    frequency resolution add up to? One response cannot tell such a pair from one mode whose frequency
-    moves with amplitude (several sensors can: the pair's shapes differ, as a rig's two beams' do)."""
-    f, z = np.abs(poles) / (2 * np.pi), -poles.real / np.abs(poles)
-    for i in range(f.size):
-        for j in range(i + 1, f.size):
-            if abs(f[i] - f[j]) < z[i] * f[i] + z[j] * f[j] + resolution_hz:
-                return True
-    return False
+        return np.zeros((poles.size, poles.size), bool)
+    f, z = np.abs(poles) / (2 * np.pi), _zeta(poles)
+    resonant = structural(poles, prep)
+    close = np.abs(f[:, None] - f[None, :]) < (z * f)[:, None] + (z * f)[None, :] + prep.fs_hz / prep.n
+    return close & resonant[:, None] & resonant[None, :] & ~np.eye(poles.size, dtype=bool)
 
 
 def stride(prep: Prepared, rows: np.ndarray, cap: int = 20000) -> int:
