@@ -115,11 +115,13 @@ def test_a_hammer_record_that_starts_at_the_hit_gets_a_baseline_and_its_cubic():
     # steady force each block's simulation met as a step: the baseline held out 7.8 times worse than
     # predicting zero and nothing was found. The coefficient was 8.7 % off; since the record's input gain is
     # fitted with the record at rest before its hit (stop 68), its first block is simulated through the hit,
-    # the loudest part of the decay, and it is 16.7 % off (the target is 10 %)
-    d, eq = _cubic_found(197, rel=0.2)  # 16.7 %
-    assert d.prep.transient and d.baseline_test_nrmse < 0.3  # 0.17
-    (pole,) = d.baseline.model.poles
-    assert abs(pole) / (2 * np.pi) == pytest.approx(eq["natural_frequency_hz"], rel=0.02)
+    # the loudest part of the decay, and it was 16.7 % off. Its held-back blocks lie in the quiet after the
+    # decay, so the first fit's order is chosen on the decay (stop 69): the beam's second mode (365.7 Hz)
+    # joins the baseline, and the coefficient is 1.1 % off
+    d, eq = _cubic_found(197, rel=0.1)  # 1.1 %
+    assert d.prep.transient and d.baseline_test_nrmse < 0.3
+    f = np.sort(d.baseline.model.frequencies_hz)
+    assert f.size == 2 and f[0] == pytest.approx(eq["natural_frequency_hz"], rel=0.02)
 
 
 def test_a_hammer_record_at_rest_gets_its_input_gain_from_the_hit_and_its_cubic():
@@ -200,6 +202,21 @@ def test_a_gliding_pair_in_the_first_fit_leaves_its_lighter_mode():
     d, eq = _cubic_found(41, rel=0.1)
     f = np.sort(d.baseline.model.frequencies_hz)
     assert f.size == 2 and f[0] == pytest.approx(eq["natural_frequency_hz"], rel=0.01)  # and 511.8 Hz
+
+
+def test_a_hammer_decay_inside_the_first_bands_edge_keeps_its_beams_first_mode():
+    # independent seed 158: a clamped-clamped beam (174.3 and 480.6 Hz) hit 4.5 ms into a 5.4-s record at
+    # 10 kHz, one velocity sensor at the hit. The first fit's preliminary band has a band-pass edge of 0.54 s,
+    # by when the decay is gone: it saw the quiet alone, every order predicted its held-back blocks as well
+    # as zero, and it kept 480.5 Hz; the band was set above the first mode, and the cubic came out on the
+    # second, 7.2 times the generator's one-mode equivalent. The decay from the hit on gives both modes; the
+    # cubic is per mass of the first, 32 % off (the target is 10 %)
+    d, eq = _cubic_found(158, rel=0.4)
+    f = np.sort(d.baseline.model.frequencies_hz)
+    assert f.size == 2 and f[0] == pytest.approx(eq["natural_frequency_hz"], rel=0.01)
+    second = discovery_case(158).truth["structure"]["natural_frequencies_hz"][1]  # 480.6 Hz
+    assert f[1] == pytest.approx(second, rel=0.01)
+    assert d.per_mass_mode_hz(d.findings[0]) == pytest.approx(eq["natural_frequency_hz"], rel=0.01)
 
 
 def test_a_weaker_hardening_decay_gets_its_cubic_and_its_coefficient():

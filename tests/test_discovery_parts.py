@@ -16,7 +16,8 @@ from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import CLEAR, free_decay
-from ident.discovery.discover import _settle_by_backbone, _softening_look_alike, _warm, noise_floor, sum_notes
+from ident.discovery.discover import (_fit_modal, _settle_by_backbone, _softening_look_alike, _warm, noise_floor,
+                                     sum_notes)
 from ident.discovery.baselines.modal import (Columns, ModalBaseline, _design, drivable, fit_model, peak_poles,
                                              underlying_poles)
 from ident.discovery.baselines.rig import RigBaseline
@@ -358,6 +359,34 @@ def test_a_hammer_record_that_starts_at_rest_fits_its_input_gain_on_the_hit():
     true = (model.B[0] * model.C)[:, np.argsort(model.frequencies_hz)]
     got = (fitted.B[0] * fitted.C)[:, np.argsort(fitted.frequencies_hz)]
     assert np.all(np.abs(got - true) < 0.01 * np.abs(true).max(axis=1, keepdims=True))
+
+
+def test_a_short_hammer_decay_inside_the_first_bands_edge_gives_every_mode():
+    # two modes under one velocity sensor at the driving point, 175 Hz at 2 % and 480 Hz at 0.7 % damping,
+    # hit 4.5 ms into a 5-s record at 10 kHz: the decay is gone (e^-10) 0.5 s after the hit. The preliminary
+    # band's low edge makes a band-pass edge of that length, which held the whole decay, and the blocks held
+    # back to choose the order lie in the quiet after it: every order predicted them as well as zero (1.00)
+    # and the first fit kept one mode (independent seed 158, a clamped-clamped beam, the same shape: its
+    # 174.6 Hz mode lost, the band set above it). At rest before its hit, the record has no start transient
+    # to wait out, and the order is chosen on the decay: both modes at their analytic values
+    w, z = 2 * np.pi * np.array([175.0, 480.0]), np.array([0.02, 0.007])
+    phi = np.array([[np.cos(0.5), -np.sin(0.5)], [np.sin(0.5), np.cos(0.5)]])  # mass-normalised shapes
+    K, D = phi @ np.diag(w**2) @ phi.T, phi @ np.diag(2 * z * w) @ phi.T
+    lam, V = np.linalg.eig(np.block([[np.zeros((2, 2)), np.eye(2)], [-K, -D]]))
+    up = lam.imag > 0
+    model = LinearModel(lam[up], (np.linalg.inv(V)[up] @ np.r_[0, 0, 1, 0])[None, :], V[:2, up])
+    fs = 10000.0
+    F = np.zeros(50000)
+    F[45:50] = np.sin(np.pi * (np.arange(5) + 0.5) / 5)  # a 0.5 ms half-sine hit
+    v = simulate(model, F, fs, [(0, 1)])[:, 0]
+    v = v + 1e-3 * np.abs(v).max() * np.random.default_rng(2).standard_normal(v.size)
+    meas = Measurement(fs, Channel("F", "force", F), (Channel("v", "velocity", v),))
+    band, poles = _fit_modal(meas, None, None, None)
+    prep = prepare(meas)
+    assert prep.rest_until == 45 and prep.edge >= 0.5 * fs  # the decay lies within the preliminary edge
+    assert np.sort(np.abs(poles)) == pytest.approx(w, rel=2e-3)
+    assert np.sort(-poles.real / np.abs(poles)) == pytest.approx(np.sort(z), rel=0.1)
+    assert band[0] < 175.0 < 480.0 < band[1]
 
 
 def test_a_record_moving_before_its_hit_is_not_at_rest():

@@ -425,10 +425,10 @@ def peak_poles(f_hz: np.ndarray, H: np.ndarray, n_modes: int, zeta: float = 0.02
     return -zeta * w + 1j * w
 
 
-def gliding(poles: np.ndarray, prep: Prepared) -> bool:
+def gliding(poles: np.ndarray, prep: Prepared, span: int | None = None) -> bool:
     """Does a one-response fit hold two resonant modes that are an unresolved pair (``_unresolved_pairs``):
     one mode gliding with amplitude?"""
-    return bool(np.any(_unresolved_pairs(poles, prep)))
+    return bool(np.any(_unresolved_pairs(poles, prep, span)))
 
 
 def glide_partners(poles: np.ndarray, prep: Prepared) -> np.ndarray:
@@ -444,17 +444,18 @@ def _zeta(poles: np.ndarray) -> np.ndarray:
     return -poles.real / np.maximum(np.abs(poles), 1e-300)
 
 
-def _unresolved_pairs(poles: np.ndarray, prep: Prepared) -> np.ndarray:
+def _unresolved_pairs(poles: np.ndarray, prep: Prepared, span: int | None = None) -> np.ndarray:
     """(m, m): which two of a one-response fit's resonant modes (``structural``) are closer in frequency than
-    their half-power bandwidths and the record's frequency resolution add up to (none with more responses).
-    One response cannot tell such a pair from one mode whose frequency moves with amplitude (several sensors
-    can: the pair's shapes differ, as a rig's two beams' do)."""
+    their half-power bandwidths and the record's frequency resolution add up to (none with more responses;
+    the resolution of ``span`` samples where the response lasts only so long, a hammer's decay). One response
+    cannot tell such a pair from one mode whose frequency moves with amplitude (several sensors can: the
+    pair's shapes differ, as a rig's two beams' do)."""
     poles = np.asarray(poles, complex)
     if len(prep.names) != 1:
         return np.zeros((poles.size, poles.size), bool)
     f, z = np.abs(poles) / (2 * np.pi), _zeta(poles)
     resonant = structural(poles, prep)
-    close = np.abs(f[:, None] - f[None, :]) < (z * f)[:, None] + (z * f)[None, :] + prep.fs_hz / prep.n
+    close = np.abs(f[:, None] - f[None, :]) < (z * f)[:, None] + (z * f)[None, :] + prep.fs_hz / (span or prep.n)
     return close & resonant[:, None] & resonant[None, :] & ~np.eye(poles.size, dtype=bool)
 
 
@@ -465,8 +466,22 @@ def stride(prep: Prepared, rows: np.ndarray, cap: int = 20000) -> int:
     return max(1, int(prep.fs_hz / (8 * prep.band[1])), int(np.ceil(rows.size / cap)))
 
 
+LOUD = 8.0  # a response stands out of its noise at this many times its median absolute value
+
+
+def decay_rows(prep: Prepared, rows: np.ndarray) -> np.ndarray | None:
+    """Of ``rows``, those up to the last where a response stands out of its noise (``LOUD`` times its median
+    absolute value over the rows): a hammer record's decay; None where no response does."""
+    y = np.abs(prep.measured[rows])
+    loud = np.any(y > LOUD * np.median(y, axis=0), axis=1)
+    if not loud.any() or rows[loud][-1] == rows[0]:
+        return None
+    return rows[rows <= rows[loud][-1]]
+
+
 def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
-              poles0: np.ndarray | None = None, check: np.ndarray | None = None) -> tuple[LinearModel, float]:
+              poles0: np.ndarray | None = None, check: np.ndarray | None = None,
+              decay: np.ndarray | None = None) -> tuple[LinearModel, float]:
     """The modal model of the lowest order after which two more modes no longer cut the error of any
     response by 10 % (and 0.005); returns it with its fit error on ``rows`` (NRMSE, mean over responses).
 
@@ -477,8 +492,17 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
     response of a nonlinear structure at that line (independent Duffing seed 23: seven modes, four of
     them undamped, where the generator has one; held-out NRMSE 0.41 against a fit error of 0.03). What
     the input alone makes on rows the fit did not see is what such modes cannot fake. With ``poles0`` (a
-    fit of the same data in another band) the order is taken from it and only refined."""
+    fit of the same data in another band) the order is taken from it and only refined.
+
+    With ``decay`` (a hammer record's decay, ``decay_rows``) the order is chosen on those rows instead:
+    each order's error there from the input alone, the record at rest before its hit where it is
+    (``Prepared.rest_until``), and two modes closer than the decay can resolve are one gliding mode
+    (``gliding`` over the decay's span: a hardening decay of 0.4 s is not two modes 3.8 Hz apart,
+    independent seed 4)."""
     st = stride(prep, rows)
+    at_rest, span = False, None
+    if decay is not None:
+        check, at_rest, span = decay, prep.rest_until is not None, int(decay[-1] - decay[0] + 1)
     if poles0 is not None:
         poles0 = np.asarray(poles0, complex)
         poles = refine_poles(poles0, prep, rows, max_nfev=30, stride=st)
@@ -517,7 +541,7 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
                 if poles is None:
                     continue
                 poles = refine_poles(poles, prep, rows, max_nfev=12, stride=2 * st)
-                C, fit = fit_residues(poles, prep, rows, at=check)
+                C, fit = fit_residues(poles, prep, rows, at=check, at_rest=at_rest)
             except NUMERIC_FAILURES:
                 continue
             tried.append((_per_response(fit, scored), poles, C))
@@ -530,7 +554,7 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
         # with one response, two modes closer than their bandwidths are one mode gliding with amplitude
         # (independent seed 64, a clamped-clamped beam's hardening hammer decay: 192.6 and 195.1 Hz where
         # the beam has one mode at 185.8 Hz, and the cubic then lost to a quadratic stiffness)
-        if gliding(poles, prep):
+        if gliding(poles, prep, span):
             misses += 1
             if misses == 2:
                 break
@@ -571,8 +595,9 @@ class ModalBaseline(Baseline):
 
     @classmethod
     def fit(cls, prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
-            poles0: np.ndarray | None = None, check: np.ndarray | None = None) -> "ModalBaseline":
-        model, err = fit_model(prep, rows, max_modes, poles0, check)
+            poles0: np.ndarray | None = None, check: np.ndarray | None = None,
+            decay: np.ndarray | None = None) -> "ModalBaseline":
+        model, err = fit_model(prep, rows, max_modes, poles0, check, decay)
         repaired = undegenerate(model, prep, rows)
         if repaired is not None:
             model, err = repaired
