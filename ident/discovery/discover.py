@@ -62,7 +62,8 @@ def _fit_modal(m: Measurement, fit_data: Measurement | None, train: slice | None
     """Band from a first fit on the preliminary band, then the baseline fitted again in the modes' band.
 
     The first fit chooses its order on every third training block (of the whole record with ``fit_data``),
-    left out of the fit; a single training slice (``--train``) leaves the choice to the fit error."""
+    left out of the fit; a single training slice (``--train``) leaves the choice to the fit error, and a
+    hammer record whose held-back blocks are the quiet after its decay to the decay (``_order_on_the_decay``)."""
     src = fit_data or m
     prep0 = prepare(src)
     split0 = _split(prep0, None if fit_data else train, None if fit_data else test)
