@@ -188,11 +188,16 @@ def admissible(poles: np.ndarray, prep: Prepared) -> bool:
                 and np.all(np.abs(poles) < 2 * np.pi * 0.49 * prep.fs_hz))
 
 
+def _zeta(poles: np.ndarray) -> np.ndarray:
+    """Damping ratios of poles (safe at a pole at zero)."""
+    return -poles.real / np.maximum(np.abs(poles), 1e-300)
+
+
 def structural(poles: np.ndarray, prep: Prepared) -> np.ndarray:
     """Which poles are structural modes: lightly damped (zeta < 0.3), inside the band the data carry
     power in."""
     f = np.abs(poles) / (2 * np.pi)
-    return (-poles.real / np.maximum(np.abs(poles), 1e-300) < 0.3) & (f >= prep.band[0]) & (f <= prep.band[1])
+    return (_zeta(poles) < 0.3) & (f >= prep.band[0]) & (f <= prep.band[1])
 
 
 def drivable(poles: np.ndarray, prep: Prepared) -> np.ndarray:
@@ -204,8 +209,7 @@ def drivable(poles: np.ndarray, prep: Prepared) -> np.ndarray:
     integrated accelerations (seed 5: 0.015 Hz, a residue 1e5 times the modes'). Given a force's gain,
     the first rated the location's one mode (its resonance 1 / zeta is unbounded) and the second made
     every element's simulation leave its bound (35 of 38 candidates)."""
-    zeta = -poles.real / np.maximum(np.abs(poles), 1e-300)
-    return structural(poles, prep) & (zeta * np.abs(poles) * prep.n / prep.fs_hz >= RESOLVED)
+    return structural(poles, prep) & (_zeta(poles) * np.abs(poles) * prep.n / prep.fs_hz >= RESOLVED)
 
 
 ZETA_MAX = 0.99  # the largest damping ratio a fitted baseline's pole keeps (``undegenerate``)
@@ -233,7 +237,7 @@ def undegenerate(model: LinearModel, prep: Prepared, rows: np.ndarray) -> tuple[
     (the joint refits' too) moved eleven verdicts of the benchmark's hundred, five right ones lost and
     three gained (stop 65)."""
     p = np.asarray(model.poles, complex)
-    if not np.any(-p.real / np.maximum(np.abs(p), 1e-300) > ZETA_MAX):
+    if not np.any(_zeta(p) > ZETA_MAX):
         return None
     q = bounded(p)
     C, fit = fit_residues(q, prep, rows, at_rest=True)
@@ -438,10 +442,6 @@ def glide_partners(poles: np.ndarray, prep: Prepared) -> np.ndarray:
     pairs = _unresolved_pairs(poles, prep)
     z = _zeta(np.asarray(poles, complex))
     return np.any(pairs & (z[None, :] < z[:, None]), axis=1)
-
-
-def _zeta(poles: np.ndarray) -> np.ndarray:
-    return -poles.real / np.maximum(np.abs(poles), 1e-300)
 
 
 def _unresolved_pairs(poles: np.ndarray, prep: Prepared, span: int | None = None) -> np.ndarray:
