@@ -290,6 +290,36 @@ def _chain(c: float = 2.0) -> LinearModel:
     return LinearModel(lam[up], (np.linalg.inv(V)[up] @ np.r_[0, 0, 0, 1 / m, 0, 0])[None, :], V[:3, up])
 
 
+def test_a_driving_point_is_named_only_where_the_record_tells_it_from_the_other_responses():
+    # the chain pushed at its first mass (modes 12.2, 22.5, 29.4 Hz; shapes (1, 1.41, 1), (1, 0, -1),
+    # (1, -1.41, 1))
+    model, fs = _chain(), 200.0
+    rng = np.random.default_rng(3)
+
+    def read(F, order, signs):
+        acc = simulate(model, F, fs, [(0, 2), (1, 2), (2, 2)]) * np.array(signs)
+        return prepare(Measurement(fs, Channel("F", "force", F),
+                                   tuple(Channel(f"x{i + 1}", "acceleration", acc[:, i]) for i in order)))
+
+    # driven across all three modes, the third mass reads against the first in the second mode and the
+    # second mass in the third: the first mass alone reads as a driving point, and its accelerometer, upside
+    # down, is flipped, with no caveat
+    broad = read(rng.standard_normal(40000), (0, 1, 2), (-1.0, 1.0, 1.0))
+    assert broad.signs.tolist() == [-1, 1, 1] and broad.driving_point == 0
+    assert broad.sign_notes == [broad.sign_notes[0]] and "taken for it" not in broad.sign_notes[0]
+    # driven only about the first mode (8-16 Hz), where every mass moves in phase with the first, each of the
+    # three reads as a driving point: one is taken for it (the modal baseline's reciprocity needs one), and
+    # the report says that the other two read as one too (it had named one as the driving point, no more)
+    spec = np.fft.rfft(rng.standard_normal(40000))
+    f = np.fft.rfftfreq(40000, 1 / fs)
+    narrow = read(np.fft.irfft(np.where((f > 8) & (f < 16), spec, 0), 40000), (2, 0, 1), (1.0, 1.0, 1.0))
+    taken = narrow.names[narrow.driving_point]
+    others = [n for n in narrow.names if n != taken]
+    assert narrow.signs.tolist() == [1, 1, 1]
+    assert any(n.startswith(f"{taken}: the driving point") and f"taken for it, but {', '.join(others)} read as "
+               "one too" in n for n in narrow.sign_notes)
+
+
 def test_modal_fit_recovers_a_chains_analytic_modes():
     model = _chain()
     fs = 200.0
