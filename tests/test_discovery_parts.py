@@ -320,6 +320,30 @@ def test_a_driving_point_is_named_only_where_the_record_tells_it_from_the_other_
                "one too" in n for n in narrow.sign_notes)
 
 
+def test_a_laser_against_the_hit_on_a_hardening_decay_is_flipped():
+    # a hardening oscillator (150 Hz, zeta 0.4 %, k3 x^2 / k = 3e7 x^2: 15 % stiffer in frequency at the
+    # hit's peak, 120 um) hit from rest by a 1 ms half sine, read by a velocity sensor facing the force: the
+    # decay's glide scatters its receptance's phase across the peak, so that reading said nothing ("kept as
+    # recorded"); its first motion after the hit, against the hit, says it is flipped
+    fs, n = 10000.0, 20000
+    t = np.arange(n) / fs
+    w, zeta, k3 = 2 * np.pi * 150.0, 0.004, 3e7
+    F = np.where((t >= 0.005) & (t < 0.006), 200.0 * np.sin(np.pi * (t - 0.005) / 0.001), 0.0)
+
+    def rhs(tt, x):
+        return [x[1], np.interp(tt, t, F) - 2 * zeta * w * x[1] - w * w * x[0] * (1 + k3 * x[0] ** 2)]
+
+    sol = solve_ivp(rhs, (0, t[-1]), [0.0, 0.0], t_eval=t, max_step=0.5 / fs, rtol=1e-9, atol=1e-12)
+    rng = np.random.default_rng(0)
+    v = sol.y[1] + 0.002 * np.abs(sol.y[1]).max() * rng.standard_normal(n)
+    read = F + 0.4 * rng.standard_normal(n)
+    for sign in (-1.0, 1.0):
+        prep = prepare(Measurement(fs, Channel("F", "force", read), (Channel("v", "velocity", sign * v),)))
+        assert prep.signs.tolist() == [sign] and prep.driving_point == 0
+        assert prep.sign_notes == ["v: flipped (moved against the hit: a driving point moves with it)" if sign < 0
+                                   else "v: the driving point (moved with the hit)"]
+
+
 def test_modal_fit_recovers_a_chains_analytic_modes():
     model = _chain()
     fs = 200.0
