@@ -17,7 +17,7 @@ from scipy.signal import butter, hilbert, sosfiltfilt
 from threadpoolctl import threadpool_limits
 
 from daq.sim.independent.cases import discovery_case
-from ident.cli.bench_discovery import independent_case, judge
+from ident.cli.bench_discovery import driving_sign, independent_case, judge
 from ident.discovery import discover, search
 from ident.discovery.baselines.modal import ZETA_MAX, ModalBaseline, bounded
 from ident.discovery.search import block_errors, compensation, simulation_bound
@@ -417,3 +417,18 @@ def test_a_drift_pole_below_the_band_stays_a_pair_and_the_free_runs_start_right(
                                       ** 2)) / prep.measured[rows, i].std()
                      for i, (ch, ref) in enumerate(zip(m.responses, c.reference.responses))])
     assert 0 < floor < err < 3 * floor, (err, floor)
+
+
+def test_the_driving_points_sign_on_a_hammer_record_and_a_chain_where_the_record_cannot_tell():
+    # seed 4: a clamped-clamped beam hit from rest, its laser facing the force, its decay gliding (Im of its
+    # receptance negative on 33 % of its power, neither side of the 10-90 % rule): its first motion flips it
+    case = independent_case(4)
+    assert case.driven == "v1" and case.signs == {"v1": -1}
+    prep = prepare(case.measurement)
+    assert driving_sign(case, prep) == "right" and prep.signs.tolist() == [-1]
+    # seed 72: a chain pushed at its second mass, driven about its first mode, where all four masses move in
+    # phase: the first is taken for the driving point, and the report names the driven one among the others
+    case = independent_case(72)
+    prep = prepare(case.measurement)
+    assert case.driven == "a2" and driving_sign(case, prep) == "another"
+    assert "taken for it, but a2, a3, a4 read as one too" in prep.sign_notes[0]

@@ -75,6 +75,8 @@ class Case:
     clipped: frozenset = frozenset()  # responses the generator's instruments clipped (a true clipping finding)
     strength: float | None = None  # the generator's effect strength: RMS(effect's force) / RMS(static force)
     reference: Measurement | None = None  # the responses before the instruments' noise (``noise_floor``)
+    driven: str | None = None  # under a force: the response at its point (or on its beam), where known
+    signs: dict | None = None  # each response's sign against the excitation's as recorded
 
 
 @dataclass
@@ -96,6 +98,7 @@ class Verdict:
     strength: float | None = None  # the case's effect strength (``Case.strength``)
     noise_floor: float | None = None  # the held-out NRMSE the responses' noise alone gives (``noise_floor``)
     record: dict | None = None  # with --save: the case's truth and discover's JSON (``saved_record``)
+    sign: str | None = None  # under a force, the driving point discovery took (``driving_sign``)
 
 
 RIG_CASE_S = 40.0  # the rig generator's case length
@@ -168,7 +171,7 @@ def run_case(args: tuple[str, int, float, bool, bool, str | None]) -> Verdict:
         d, v = None, Verdict(seed, case.family, SYNONYMS.get(case.cause, case.cause), f"error: {exc}", "", False, 0,
                              None, None, time.perf_counter() - t0, case.info, twin=twin, strength=case.strength)
     else:
-        v = replace(judge(case, d, time.perf_counter() - t0), twin=twin)
+        v = replace(judge(case, d, time.perf_counter() - t0), twin=twin, sign=driving_sign(case, d.prep))
         if case.reference is not None:
             v = replace(v, noise_floor=noise_floor(d, case.measurement, case.reference))
     return replace(v, record=saved_record(case, v, d)) if keep else v
@@ -180,7 +183,7 @@ def saved_record(case: Case, v: Verdict, d) -> dict:
     candidate with its held-out gain, p-value and parameters), so that misses can be studied and selection
     rules tried without running the cases again. ``d`` is None where discover raised."""
     verdict = {k: getattr(v, k) for k in ("named", "location", "right", "extra", "parameter_error", "gain",
-                                          "seconds", "baseline_nrmse", "noise_floor")}
+                                          "seconds", "baseline_nrmse", "noise_floor", "sign")}
     return finite({"seed": case.seed, "twin": v.twin, "family": case.family, "info": case.info,
                    "truth": {"cause": case.cause, "location": case.location, "strength": case.strength,
                              "parameters": case.truth, "clipped": sorted(case.clipped)},
@@ -247,8 +250,29 @@ def independent_case(seed: int, generated=None, twin: bool = False, family: str 
     if all(f"clean:{ch.name}" in c.truth_series for ch in responses):
         reference = Measurement(m.fs_hz, m.excitation, tuple(
             Channel(ch.name, ch.kind, np.asarray(c.truth_series[f"clean:{ch.name}"], float)) for ch in responses))
+    st = t.get("structure") or {}
+    driven = None
+    if kind == "force":
+        names = [ch.name for ch in responses]
+        driven = (f"a{st['force_on_mass']}" if "force_on_mass" in st
+                  else f"tip{st['stinger']['beam']}" if "stinger" in st
+                  else names[0] if len(names) == 1 else None)
+    signs = {ch.name: int(t["signs"][ch.name] * t["signs"][col]) for ch in responses}
     return Case(seed, c.family, m, None, cause, t.get("location") or "", truth, info, clipped,
-                None if strength is None else float(strength), reference)
+                None if strength is None else float(strength), reference, driven, signs)
+
+
+def driving_sign(case: Case, prep) -> str | None:
+    """Under a force with a known driven response, what discovery made of the driving point: "right" (the
+    driven response taken, its sign as analysed the physics'), "wrong sign" (taken, its sign not), "another"
+    (another response taken), "none" (none taken)."""
+    if case.driven is None or case.signs is None or prep is None:
+        return None
+    if prep.driving_point is None:
+        return "none"
+    if prep.names[prep.driving_point] != case.driven:
+        return "another"
+    return "right" if case.signs[case.driven] * prep.signs[prep.driving_point] > 0 else "wrong sign"
 
 
 def report(verdicts: list[Verdict], wall_s: float) -> str:
@@ -276,6 +300,11 @@ def report(verdicts: list[Verdict], wall_s: float) -> str:
                          f" ({len(errs)} cases); gain median {np.median(gains):.2f}, min {np.min(gains):.2f}")
     lines += by_strength(verdicts)
     lines += by_floor(verdicts)
+    taken = Counter(v.sign for v in verdicts if v.sign is not None)
+    if taken:
+        lines.append(f"driving point under a force ({sum(taken.values())} cases with a known driven response): taken "
+                     f"with its sign right {taken['right']}, its sign wrong {taken['wrong sign']}, another response "
+                     f"taken {taken['another']}, none {taken['none']}")
     secs = [v.seconds for v in verdicts]
     lines.append(f"run time per case: median {np.median(secs):.1f} s, max {np.max(secs):.1f} s; "
                  f"wall {wall_s:.0f} s")
