@@ -29,7 +29,8 @@ from ident.discovery.model import (Element, LinearModel, mode_states, nudging_ga
                                   without_feedthrough)
 from ident.discovery.search import (Candidate, Settings, choose, clustered_p, one_sign, paired_p, pieces_per_block,
                                     predict, signed_rank_p, significant)
-from ident.discovery.signals import convert, first_family, force_window, frf, miso_frf, prepare, within_budget
+from ident.discovery.signals import (_first_motion, convert, first_family, force_window, frf, miso_frf, prepare,
+                                    within_budget)
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
 
@@ -342,6 +343,9 @@ def test_a_laser_against_the_hit_on_a_hardening_decay_is_flipped():
         assert prep.signs.tolist() == [sign] and prep.driving_point == 0
         assert prep.sign_notes == ["v: flipped (moved against the hit: a driving point moves with it)" if sign < 0
                                    else "v: the driving point (moved with the hit)"]
+    # a record that ends before a quarter period of the mode after the hit says nothing
+    assert _first_motion(read[:62], v[:62], 1, fs, (20.0, 2000.0), 150.0) == 0
+    assert _first_motion(read, -v, 1, fs, (20.0, 2000.0), 150.0) == -1
 
 
 def test_modal_fit_recovers_a_chains_analytic_modes():

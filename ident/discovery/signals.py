@@ -393,7 +393,7 @@ def _signs(m: Measurement, band: tuple[float, float]) -> tuple[np.ndarray, list[
     driving, alike, everywhere = _driving_point(recs)
     if driving is None and len(recs) == 1 and impulsive(u) and rest_until(u, Y) is not None:
         # one response hit from rest: its phase is no witness where the decay glides (a hardening beam's:
-        # independent seeds' clamped-clamped beams read Im < 0 on 62-86 % of their power, or 14-34 % when
+        # independent seeds' clamped-clamped beams read Im < 0 on 62-86 % of their power, or 13-34 % when
         # the laser faced the force), its first motion is
         i, rec, w = recs[0]
         moved = _first_motion(u, Y[:, i], ORDER[m.responses[i].kind], fs, band, float(f[sel][np.argmax(w)]))
@@ -438,9 +438,9 @@ def _driving_point(recs: list[tuple[int, np.ndarray, np.ndarray]]
     as well, and whether it reads as one at every resonance.
 
     A response reads as a driving point (or as one read against the force) where Im of its receptance has
-    one sign on ``DRIVING_SHARE`` of its power; it reads as one at every resonance where that sign holds at
-    every resonance carrying ``RESONANCE_SHARE`` of its power, since a transfer point changes sign at a mode
-    whose shape has opposite signs at it and at the driving point. The one response that reads so at every
+    one sign on ``DRIVING_SHARE`` of its power, and as one at every resonance where that sign also holds on
+    most of the power within each resonance carrying ``RESONANCE_SHARE`` of its power: a transfer point
+    changes sign at a mode whose shape has opposite signs at it and at the driving point. The one response that reads so at every
     resonance is the driving point. Where several do, or none does, the record does not say which response
     is driven, and the most one-sided of them is taken (the modal baseline's reciprocity needs one; taking
     none lost three right answers of seeds 0-99 (16, 21, 42) and gained none); the others are returned so
@@ -484,8 +484,11 @@ def _first_motion(u: np.ndarray, y: np.ndarray, order: int, fs_hz: float, band: 
     quarter = max(1, int(round(fs_hz / f_mode / 4)))
     blow = float(np.sum((u - np.median(u))[at:at + quarter]))
     x = convert(y - np.median(y), fs_hz, band, order, 0)
-    lean = float(np.mean(x[at + quarter // 2:at + 3 * quarter // 2])) / max(float(np.abs(x).max()), 1e-300)
-    return 0 if abs(lean) < FIRST_MOTION or blow == 0 else int(np.sign(lean) * np.sign(blow))
+    after = x[at + quarter // 2:at + 3 * quarter // 2]
+    if after.size < quarter or blow == 0:  # a hit too near the record's end
+        return 0
+    lean = float(np.mean(after)) / max(float(np.abs(x).max()), 1e-300)
+    return 0 if abs(lean) < FIRST_MOTION else int(np.sign(lean) * np.sign(blow))
 
 
 def _resonances(power: np.ndarray) -> list[np.ndarray]:
