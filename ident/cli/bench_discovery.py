@@ -99,6 +99,7 @@ class Verdict:
     noise_floor: float | None = None  # the held-out NRMSE the responses' noise alone gives (``noise_floor``)
     record: dict | None = None  # with --save: the case's truth and discover's JSON (``saved_record``)
     sign: str | None = None  # under a force, the driving point discovery took (``driving_sign``)
+    through: str | None = None  # ... and the response the modal baseline's reciprocity went through
 
 
 RIG_CASE_S = 40.0  # the rig generator's case length
@@ -171,7 +172,10 @@ def run_case(args: tuple[str, int, float, bool, bool, str | None]) -> Verdict:
         d, v = None, Verdict(seed, case.family, SYNONYMS.get(case.cause, case.cause), f"error: {exc}", "", False, 0,
                              None, None, time.perf_counter() - t0, case.info, twin=twin, strength=case.strength)
     else:
-        v = replace(judge(case, d, time.perf_counter() - t0), twin=twin, sign=driving_sign(case, d.prep))
+        through = getattr(d.baseline, "driving_point", None)
+        v = replace(judge(case, d, time.perf_counter() - t0), twin=twin, sign=driving_sign(case, d.prep),
+                    through=None if case.driven is None or through is None else
+                    ("driven" if d.prep.names[through] == case.driven else "another"))
         if case.reference is not None:
             v = replace(v, noise_floor=noise_floor(d, case.measurement, case.reference))
     return replace(v, record=saved_record(case, v, d)) if keep else v
@@ -183,7 +187,7 @@ def saved_record(case: Case, v: Verdict, d) -> dict:
     candidate with its held-out gain, p-value and parameters), so that misses can be studied and selection
     rules tried without running the cases again. ``d`` is None where discover raised."""
     verdict = {k: getattr(v, k) for k in ("named", "location", "right", "extra", "parameter_error", "gain",
-                                          "seconds", "baseline_nrmse", "noise_floor", "sign")}
+                                          "seconds", "baseline_nrmse", "noise_floor", "sign", "through")}
     return finite({"seed": case.seed, "twin": v.twin, "family": case.family, "info": case.info,
                    "truth": {"cause": case.cause, "location": case.location, "strength": case.strength,
                              "parameters": case.truth, "clipped": sorted(case.clipped)},
@@ -251,13 +255,13 @@ def independent_case(seed: int, generated=None, twin: bool = False, family: str 
         reference = Measurement(m.fs_hz, m.excitation, tuple(
             Channel(ch.name, ch.kind, np.asarray(c.truth_series[f"clean:{ch.name}"], float)) for ch in responses))
     st = t.get("structure") or {}
-    driven = None
+    driven = signs = None
     if kind == "force":
         names = [ch.name for ch in responses]
         driven = (f"a{st['force_on_mass']}" if "force_on_mass" in st
                   else f"tip{st['stinger']['beam']}" if "stinger" in st
                   else names[0] if len(names) == 1 else None)
-    signs = {ch.name: int(t["signs"][ch.name] * t["signs"][col]) for ch in responses}
+        signs = {ch.name: int(t["signs"][ch.name] * t["signs"][col]) for ch in responses}
     return Case(seed, c.family, m, None, cause, t.get("location") or "", truth, info, clipped,
                 None if strength is None else float(strength), reference, driven, signs)
 
@@ -301,10 +305,12 @@ def report(verdicts: list[Verdict], wall_s: float) -> str:
     lines += by_strength(verdicts)
     lines += by_floor(verdicts)
     taken = Counter(v.sign for v in verdicts if v.sign is not None)
+    through = Counter(v.through for v in verdicts if v.through is not None)
     if taken:
         lines.append(f"driving point under a force ({sum(taken.values())} cases with a known driven response): taken "
                      f"with its sign right {taken['right']}, its sign wrong {taken['wrong sign']}, another response "
-                     f"taken {taken['another']}, none {taken['none']}")
+                     f"taken {taken['another']}, none {taken['none']}; the modal baseline's reciprocity through the "
+                     f"driven response {through['driven']}, through another {through['another']}")
     secs = [v.seconds for v in verdicts]
     lines.append(f"run time per case: median {np.median(secs):.1f} s, max {np.max(secs):.1f} s; "
                  f"wall {wall_s:.0f} s")

@@ -14,7 +14,8 @@ against the force) is recognised from frequency responses and flipped, and the r
   same in every mode whose shape has one sign at it and at the driving point, so the driving point is the
   response that alone reads as one at every resonance carrying its power. Where several do (a chain driven
   near its first mode, all masses in phase), the record does not say which is driven: the most one-sided is
-  taken, since the modal baseline's reciprocity needs one, and the report names the others;
+  taken, the report names the others (``Prepared.driving_alike``), and a modal baseline takes its
+  reciprocity through whichever of them explains most (``discover._reciprocity``);
 - under a shaken frame, a tip moving in its first mode has absolute acceleration a_b (1 - i / (2 zeta))
   at resonance, so Im(a_tip / a_b) < 0 at the lowest resonance; > 0 is a flipped sensor.
 Responses that are neither (transfer points) keep their sign; a pair of them is searched both as a
@@ -338,6 +339,9 @@ class Prepared:
     signs: np.ndarray  # (k,) +1 as recorded, -1 flipped
     sign_notes: list[str] = field(default_factory=list)
     driving_point: int | None = None
+    # the other responses that read as a driving point as well (``_driving_point``), each with its sign as one
+    # as prepared (-1: it reads as one read against the force): reciprocity may be taken through one of them
+    driving_alike: tuple[tuple[int, int], ...] = ()
     excitation_kind: str = "force"
     transient: bool = False  # a hammer-hit record
     blows: tuple[int, ...] = ()  # samples where unmodelled blows strike: free responses start there
@@ -357,8 +361,10 @@ class Prepared:
         return self.excitation_kind == "base_acceleration"
 
 
-def _signs(m: Measurement, band: tuple[float, float]) -> tuple[np.ndarray, list[str], int | None]:
-    """Signs to apply to the responses and why (see the module's docstring)."""
+def _signs(m: Measurement, band: tuple[float, float]
+           ) -> tuple[np.ndarray, list[str], int | None, tuple[tuple[int, int], ...]]:
+    """Signs to apply to the responses and why (see the module's docstring), the driving point, and the
+    other responses that read as one (``Prepared.driving_alike``)."""
     fs = m.fs_hz
     u = np.asarray(m.excitation.values, float)
     Y = np.column_stack([np.asarray(c.values, float) for c in m.responses])
@@ -369,7 +375,7 @@ def _signs(m: Measurement, band: tuple[float, float]) -> tuple[np.ndarray, list[
     notes: list[str] = []
     recs: list[tuple[int, np.ndarray, np.ndarray]] = []
     if sel.sum() < 4:
-        return signs, ["signs: kept as recorded (too few excited lines to judge)"], None
+        return signs, ["signs: kept as recorded (too few excited lines to judge)"], None, ()
     for i, ch in enumerate(m.responses):
         order = ORDER[ch.kind]
         if m.base_excited:
@@ -402,7 +408,7 @@ def _signs(m: Measurement, band: tuple[float, float]) -> tuple[np.ndarray, list[
             name = m.responses[i].name
             notes.append(f"{name}: flipped (moved against the hit: a driving point moves with it)" if moved < 0
                          else f"{name}: the driving point (moved with the hit)")
-            return signs, notes, i
+            return signs, notes, i, ()
     if driving is not None:
         i, neg = driving
         name = m.responses[i].name
@@ -412,7 +418,7 @@ def _signs(m: Measurement, band: tuple[float, float]) -> tuple[np.ndarray, list[
         what = "flipped, as a driving point read against the force" if neg < 0.5 else "the driving point"
         if alike:
             notes.append(f"{name}: {what} ({share}); taken for it, but "
-                         + ", ".join(m.responses[j].name for j in alike)
+                         + ", ".join(m.responses[j].name for j, _ in alike)
                          + f" read{'s' if len(alike) == 1 else ''} as one too: the record does not say which "
                          "response is driven (an input through more of the modes would)")
         elif not everywhere:
@@ -424,7 +430,8 @@ def _signs(m: Measurement, band: tuple[float, float]) -> tuple[np.ndarray, list[
             notes.append(f"{name}: the driving point ({share})")
     if not notes:
         notes.append("signs: kept as recorded")
-    return signs, notes, None if driving is None else driving[0]
+    return (signs, notes, None if driving is None else driving[0],
+            tuple((j, 1 if neg >= 0.5 else -1) for j, neg in alike))
 
 
 DRIVING_SHARE = 0.9  # a driving point's receptance has Im < 0 on at least this share of its power
@@ -432,10 +439,10 @@ RESONANCE_SHARE = 0.02  # a resonance counts for a response where it holds at le
 
 
 def _driving_point(recs: list[tuple[int, np.ndarray, np.ndarray]]
-                   ) -> tuple[tuple[int, float] | None, list[int], bool]:
+                   ) -> tuple[tuple[int, float] | None, list[tuple[int, float]], bool]:
     """The response taken for the driving point among receptances ``(index, receptance, power weight)`` on
     the driven lines, as ``(index, share of its power where Im < 0)``, every other response that reads as one
-    as well, and whether it reads as one at every resonance.
+    as well (the same pairs), and whether it reads as one at every resonance.
 
     A response reads as a driving point (or as one read against the force) where Im of its receptance has
     one sign on ``DRIVING_SHARE`` of its power, and as one at every resonance where that sign also holds on
@@ -444,9 +451,9 @@ def _driving_point(recs: list[tuple[int, np.ndarray, np.ndarray]]
     resonance is the driving point. Where several do, or none does, the record does not say which response
     is driven, and the most one-sided of them is taken (the modal baseline's reciprocity needs one; taking
     none lost three right answers of seeds 0-99 (16, 21, 42) and gained none); the others are returned so
-    that the report can say so (independent seed 72, a chain driven at its second mass near its first
-    mode: all four masses read passive on 100 % of their power, and the first had been reported as the
-    driving point)."""
+    that the report can say so and the baseline can choose among them (independent seed 72, a chain driven
+    at its second mass near its first mode: all four masses read passive on 100 % of their power, and the
+    first had been reported as the driving point)."""
     one_sided, everywhere = [], []
     if recs:
         regions = _resonances(sum(w / max(float(w.sum()), 1e-300) for _, _, w in recs))
@@ -463,7 +470,7 @@ def _driving_point(recs: list[tuple[int, np.ndarray, np.ndarray]]
     if not pool:
         return None, [], False
     taken = max(pool, key=lambda c: abs(c[1] - 0.5))  # the first of equals
-    return taken, [i for i, _ in pool if i != taken[0]], bool(everywhere)
+    return taken, [c for c in pool if c[0] != taken[0]], bool(everywhere)
 
 
 FIRST_MOTION = 0.2  # a first motion is read where its mean holds this share of the largest displacement
@@ -522,7 +529,7 @@ def prepare(m: Measurement, band: tuple[float, float] | None = None) -> Prepared
     if m.n < 8 * edge:
         raise ValueError(f"{m.n} samples hold too few periods of the band's low edge ({lo:.3g} Hz); "
                          f"give at least {8 * edge} samples or a record with higher frequencies")
-    signs, notes, driving = _signs(m, band)
+    signs, notes, driving, alike = _signs(m, band)
     u_raw = np.asarray(m.excitation.values, float)
     k = len(m.responses)
     n = m.n
@@ -560,7 +567,7 @@ def prepare(m: Measurement, band: tuple[float, float] | None = None) -> Prepared
     else:
         drive = convert(u_raw, fs, (0.0, 0.45 * fs), 0, 0)
     return Prepared(fs, m.names, [c.kind for c in m.responses], u, drive, base, zva, measured, band, edge, signs,
-                    notes, driving, m.excitation.kind, transient, rest_until=still, u_at_rest=at_rest,
+                    notes, driving, alike, m.excitation.kind, transient, rest_until=still, u_at_rest=at_rest,
                     start_s=m.start_s)
 
 

@@ -585,9 +585,10 @@ class ModalBaseline(Baseline):
               "hysteretic_joint", "linear_mismatch", "clipping")
 
     def __init__(self, model: LinearModel, driving_point: int | None, fit_nrmse: float = np.nan,
-                 drivable: np.ndarray | None = None):
+                 drivable: np.ndarray | None = None, driving_sign: int = 1):
         self.model = model
         self.driving_point = driving_point
+        self.driving_sign = driving_sign  # -1: the driving point's response reads against the force as prepared
         self.fit_nrmse = fit_nrmse
         # the modes a force may drive (``drivable``); all of them when none qualifies
         mask = np.ones(model.poles.size, bool) if drivable is None else np.asarray(drivable, bool)
@@ -631,7 +632,7 @@ class ModalBaseline(Baseline):
             # reciprocity holds per mode where the driving point moves in it: its residue at least 5 % of
             # the mode's largest (a threshold against all modes' largest let one wide pseudo-mode below
             # the band, with a large residue, switch every structural mode off)
-            cd = self.model.C[self.driving_point]
+            cd = self.driving_sign * self.model.C[self.driving_point]
             ok = (np.abs(cd) >= 0.05 * np.abs(self.model.C).max(axis=0)) & self.drivable
             return [without_feedthrough(lz, np.where(ok, lz / np.where(ok, cd, 1.0), 0.0))]
         # one real coefficient per mode: without its feedthrough a mode's gain is a real multiple of
@@ -671,7 +672,7 @@ class ModalBaseline(Baseline):
             return None
         lz = self.coordinate_modes(loc)
         r = dominant_mode(lz, self.model.poles)
-        cd = self.model.C[self.driving_point, r]
+        cd = self.driving_sign * self.model.C[self.driving_point, r]
         inv = float(np.real(lz[r] ** 2 * self._omega2i()[r] / cd)) if cd != 0 else 0.0
         return 1.0 / inv if inv > 0 else None
 
@@ -694,7 +695,7 @@ class ModalBaseline(Baseline):
         scale = 1.0 / np.maximum(prep.measured[rows].std(axis=0), 1e-300)
         m = poles.size
         new = ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point, err,
-                            drivable(poles, prep))
+                            drivable(poles, prep), self.driving_sign)
         lz = new.coordinate_modes(loc)
         with np.errstate(over="ignore", invalid="ignore"):  # a pseudo-mode's residue can be 1e160
             gains = [np.where(new.drivable, gains_from_residues(C, d, scale), 0.0) for d in D]
@@ -714,7 +715,12 @@ class ModalBaseline(Baseline):
             return self
         m = poles.size
         return ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point,
-                             _nrmse(fit, prep.measured[rows]), drivable(poles, prep))
+                             _nrmse(fit, prep.measured[rows]), drivable(poles, prep), self.driving_sign)
+
+    def through(self, driving_point: int, sign: int) -> "ModalBaseline":
+        """The same model with its reciprocity taken through another response (``sign`` -1 where that
+        response reads as a driving point read against the force as prepared)."""
+        return ModalBaseline(self.model, driving_point, self.fit_nrmse, self.drivable, sign)
 
 
 def estimate_state(model: LinearModel, prep: Prepared, start: int, stop: int) -> np.ndarray:
