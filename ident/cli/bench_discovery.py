@@ -75,7 +75,7 @@ class Case:
     clipped: frozenset = frozenset()  # responses the generator's instruments clipped (a true clipping finding)
     strength: float | None = None  # the generator's effect strength: RMS(effect's force) / RMS(static force)
     reference: Measurement | None = None  # the responses before the instruments' noise (``noise_floor``)
-    driven: str | None = None  # under a force: the response at its point (or on its beam), where known
+    driven: str | None = None  # under a force: the response at its point (a rig's: its beam's tip), where known
     signs: dict | None = None  # each response's sign against the excitation's as recorded
 
 
@@ -307,9 +307,10 @@ def report(verdicts: list[Verdict], wall_s: float) -> str:
     taken = Counter(v.sign for v in verdicts if v.sign is not None)
     through = Counter(v.through for v in verdicts if v.through is not None)
     if taken:
-        lines.append(f"driving point under a force ({sum(taken.values())} cases with a known driven response): taken "
-                     f"with its sign right {taken['right']}, its sign wrong {taken['wrong sign']}, another response "
-                     f"taken {taken['another']}, none {taken['none']}; the modal baseline's reciprocity through the "
+        lines.append(f"driving point under a force ({sum(taken.values())} cases whose driven response is known: the "
+                     f"mass pushed, the one response, or the tip of the stinger's beam): taken with its sign right "
+                     f"{taken['right']}, its sign wrong {taken['wrong sign']}, another response taken "
+                     f"{taken['another']}, none {taken['none']}; the modal baseline's reciprocity through the "
                      f"driven response {through['driven']}, through another {through['another']}")
     secs = [v.seconds for v in verdicts]
     lines.append(f"run time per case: median {np.median(secs):.1f} s, max {np.max(secs):.1f} s; "

@@ -411,7 +411,9 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     resid_rms = {n: float(np.sqrt(np.mean(residual[train_rows, i] ** 2))) for i, n in enumerate(prep.names)}
     locations = baseline.locations(prep)
     char = characterise(baseline, prep, train_rows, residual, locations, scale)
-    if prep.driving_alike and isinstance(baseline, ModalBaseline) and baseline.driving_point is not None:
+    # (with --fit-data the baseline's driving point is the fit record's, which the alike ones are not)
+    if (fit_data is None and prep.driving_alike and isinstance(baseline, ModalBaseline)
+            and baseline.driving_point is not None):
         baseline, char = _reciprocity(baseline, prep, train_rows, residual, locations, scale, char, notes)
     ranked = sorted(locations, key=lambda loc: -char[loc.name]["explained"])[:settings.max_locations]
     say(f"characterised {len(locations)} locations; regressing every cause at the {len(ranked)} that explain most")

@@ -419,10 +419,12 @@ def _signs(m: Measurement, band: tuple[float, float]
         if alike:
             notes.append(f"{name}: {what} ({share}); taken for it, but "
                          + ", ".join(m.responses[j].name for j, _ in alike)
-                         + f" read{'s' if len(alike) == 1 else ''} as one too: the record does not say which "
-                         "response is driven (an input through more of the modes would)")
+                         + f" read{'s' if len(alike) == 1 else ''} as one too"
+                         + ("" if everywhere else " (none of them at every resonance)")
+                         + ": the record does not say which response is driven (an input through more of the "
+                         "modes would)")
         elif not everywhere:
-            notes.append(f"{name}: {what} ({share}); taken for it, though its sign changes at one resonance: "
+            notes.append(f"{name}: {what} ({share}); taken for it, though its sign changes at a resonance: "
                          "it may be a transfer point")
         elif neg < 0.5:
             notes.append(f"{name}: flipped (a driving point read against the force: {share})")
@@ -447,8 +449,8 @@ def _driving_point(recs: list[tuple[int, np.ndarray, np.ndarray]]
     A response reads as a driving point (or as one read against the force) where Im of its receptance has
     one sign on ``DRIVING_SHARE`` of its power, and as one at every resonance where that sign also holds on
     most of the power within each resonance carrying ``RESONANCE_SHARE`` of its power: a transfer point
-    changes sign at a mode whose shape has opposite signs at it and at the driving point. The one response that reads so at every
-    resonance is the driving point. Where several do, or none does, the record does not say which response
+    changes sign at a mode whose shape has opposite signs at it and at the driving point. The one response
+    that reads so at every resonance is the driving point. Where several do, or none does, the record does not say which response
     is driven, and the most one-sided of them is taken (the modal baseline's reciprocity needs one; taking
     none lost three right answers of seeds 0-99 (16, 21, 42) and gained none); the others are returned so
     that the report can say so and the baseline can choose among them (independent seed 72, a chain driven
@@ -482,9 +484,8 @@ def _first_motion(u: np.ndarray, y: np.ndarray, order: int, fs_hz: float, band: 
     against it, 0 where its motion does not say.
 
     Hit by an impulse J at the driving point, a structure at rest moves there as the sum over its modes of
-    phi_r^2 J sin(w_r t) / w_r, each term of J's sign until its half period: over the second eighth to the
-    sixth eighth of the period of the mode ``f_mode`` (the receptance's peak), the displacement has the sign
-    of the hit, and it has that sign whatever the decay does later (a gliding hardening decay, whose phase
+    phi_r^2 J sin(w_r t) / w_r, each term of J's sign until its half period: from an eighth to three eighths
+    of the period of the mode ``f_mode`` (the receptance's peak), the displacement has the sign of the hit, and it has that sign whatever the decay does later (a gliding hardening decay, whose phase
     across its peak no longer says anything). A transfer point moves so in every mode whose shape has one
     sign at it and at the hit."""
     at = int(np.flatnonzero(hits(u))[0])
