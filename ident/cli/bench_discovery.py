@@ -172,10 +172,8 @@ def run_case(args: tuple[str, int, float, bool, bool, str | None]) -> Verdict:
         d, v = None, Verdict(seed, case.family, SYNONYMS.get(case.cause, case.cause), f"error: {exc}", "", False, 0,
                              None, None, time.perf_counter() - t0, case.info, twin=twin, strength=case.strength)
     else:
-        through = getattr(d.baseline, "driving_point", None)
         v = replace(judge(case, d, time.perf_counter() - t0), twin=twin, sign=driving_sign(case, d.prep),
-                    through=None if case.driven is None or through is None else
-                    ("driven" if d.prep.names[through] == case.driven else "another"))
+                    through=reciprocity_through(case, d))
         if case.reference is not None:
             v = replace(v, noise_floor=noise_floor(d, case.measurement, case.reference))
     return replace(v, record=saved_record(case, v, d)) if keep else v
@@ -277,6 +275,15 @@ def driving_sign(case: Case, prep) -> str | None:
     if prep.names[prep.driving_point] != case.driven:
         return "another"
     return "right" if case.signs[case.driven] * prep.signs[prep.driving_point] > 0 else "wrong sign"
+
+
+def reciprocity_through(case: Case, d) -> str | None:
+    """Under a force with a known driven response, whether the modal baseline took its reciprocity through it
+    ("driven") or through another response ("another"); None where it took none."""
+    through = getattr(d.baseline, "driving_point", None)
+    if case.driven is None or through is None:
+        return None
+    return "driven" if d.prep.names[through] == case.driven else "another"
 
 
 def report(verdicts: list[Verdict], wall_s: float) -> str:
