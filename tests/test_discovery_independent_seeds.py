@@ -448,3 +448,41 @@ def test_reciprocity_through_the_response_that_explains_most_finds_a_chains_drag
     assert v.right and v.extra == 0, d.verdict()
     # the drag's coefficient, in N s^2/m^2 through the chain's masses: 41 % off the generator's element
     assert v.parameter_error < 0.5
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="a refinement starts from the joint refit alone and can end worse than the cause as "
+                          "regressed (seed 164: 0.137 against 0.094); refining from both starts (stop 71) "
+                          "gave seed 26 a false joint and gained no verdict, so it was not kept")
+def test_a_refinement_ends_no_worse_than_the_cause_as_regressed():
+    # independent seed 164: a hardening cubic at tip 1 of a base-driven rig (2,500 Hz, the beams' modes at
+    # 8.34 and 8.57 Hz). Its regression on the fitted baseline's residual simulates the busiest training
+    # blocks better than the baseline; the linear part refitted with it in place (``joint_refit``, which fits
+    # the cubic's force on the measured coordinate, not its simulation) simulates them worse than the
+    # baseline, and the refinement, which starts from that refit, ends worse still
+    c = independent_case(164)
+    assert (c.cause, c.location) == ("cubic_stiffness", "tip1")
+    with threadpool_limits(limits=1, user_api="blas"):
+        band, poles0 = D._fit_modal(c.measurement, None, None, None)
+        prep = prepare(c.measurement, band)
+        split = D._split(prep)
+        base = D._fit_in_band(prep, split, poles0)
+        warm = D._warm(base, prep)
+        residual = search.baseline_residual(base, prep, split, warm)
+        rows = split.rows("train")
+        rows = rows[np.all(np.isfinite(residual[rows]), axis=1)]
+        scale = np.maximum(prep.measured[split.rows("test")].std(axis=0), 1e-300)
+        loc = next(loc for loc in base.locations(prep) if loc.name == "tip1")
+        plain = search.regress(base, prep, rows, residual, loc, "cubic_stiffness", scale)
+        bound = simulation_bound(prep)
+        segs = search.busiest(prep, split, loc.weights, search.Settings().refine_blocks)
+
+        def error(cand):
+            return search.train_error(base, cand, prep, segs, warm, scale, bound)
+
+        e_base = error(search.Candidate("none", "tip1", {}))
+        e_plain = error(plain)
+        e_refit = error(search.joint_refit(plain, base, loc, prep, split, warm, scale))
+        ref = search.refine(plain, base, loc, prep, split, warm, scale, bound, search.Settings())
+    assert e_plain < e_base < e_refit  # measured: 0.094 < 0.110 < 0.111
+    assert ref.refined and ref.train_nrmse <= e_plain  # measured: 0.137
