@@ -34,8 +34,8 @@ from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline
                      choose, clipped_ranges, clipping_candidates, clustered_p, compensation, gain_candidates,
                      offset_findings, paired_p, pieces_per_block, predict, refine, regress, regressions, same_sensors,
                      score, significant, simulation_bound, spring_damper_responses, train_error)
-from .signals import (ORDER, Channel, Measurement, Prepared, convert, first_family, modal_band, prepare,
-                      within_budget)
+from .signals import (ORDER, Channel, Measurement, Prepared, below_band, convert, first_family, modal_band,
+                      prepare, within_budget)
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
 
@@ -348,6 +348,9 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     else:
         band, poles0 = _fit_modal(m, fit_data, train, test)
         prep = prepare(m, band)
+        for line in below_band(m, prep.band):
+            notes.append(line)
+            say(line)
         say(f"first fit: {poles0.size} lightly damped mode{'' if poles0.size == 1 else 's'}, band {band[0]:.3g}-"
             f"{band[1]:.3g} Hz; fitting there again")
     f_min = float(prep.band[0]) / 0.4
@@ -372,8 +375,10 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     rows = rows_of(split.blocks)
     longest = 2 * max(b.stop - b.start for b in split.blocks) + warm
     # (not in the first block's warm-up: its start is read off too little data to tell a blow from it)
+    starts = np.cumsum([0] + [b.stop - b.start for b in split.blocks[:-1]])
     spans = [(int(rows[0] + a), int(rows[0] + b))
-             for a, b in transients(np.nan_to_num(resid_all[rows]), period, longest, excitation=prep.u[rows])
+             for a, b in transients(np.nan_to_num(resid_all[rows]), period, longest, excitation=prep.u[rows],
+                                    starts=starts)
              if a >= warm]
     onsets = [a for a, _ in spans]
     if spans:

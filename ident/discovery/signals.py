@@ -233,6 +233,34 @@ def preliminary_band(m: Measurement) -> tuple[float, float]:
     return float(f_lo), float(f_hi)
 
 
+def below_band(m: Measurement, band: tuple[float, float], share: float = 0.5) -> list[str]:
+    """Notes on the responses that carry most of their power (more than ``share``, in the kind recorded,
+    the mean taken out) below the band's low edge: what moves them most is not analysed. Where the
+    strongest line lies below ``MIN_CYCLES`` periods of the record, the note says the record is too short
+    for it (a 0.3 s record of a 15 Hz oscillator: its band starts at 151 Hz)."""
+    fs = m.fs_hz
+    nper = welch_segment(m.n, fs)
+    floor = MIN_CYCLES * fs / m.n
+    out = []
+    for ch in m.responses:
+        y = np.asarray(ch.values, float)
+        f, p = welch(y - y.mean(), fs, nperseg=nper)
+        total = float(p[1:].sum())
+        if not total > 0:
+            continue
+        low = float(p[1:][f[1:] < band[0]].sum()) / total
+        if low <= share:
+            continue
+        peak = float(f[1:][np.argmax(p[1:])])
+        note = (f"{ch.name}: {100 * low:.0f} % of its power lies below the analysed band's low edge "
+                f"({band[0]:.3g} Hz): what moves it most is not analysed")
+        if peak < floor:
+            note += (f"; its strongest line, {peak:.3g} Hz, is below the {floor:.3g} Hz from which this "
+                     f"{m.n / fs:.3g} s record holds {MIN_CYCLES} periods: a longer record reaches it")
+        out.append(note)
+    return out
+
+
 def modal_band(frequencies_hz: np.ndarray, fs_hz: float, n: int, harmonics: float = 4.5) -> tuple[float, float]:
     """The band a model with these modes explains: from 0.4 x the lowest mode (at least ``MIN_CYCLES``
     periods in the record) to ``harmonics`` x the highest (the drive's 3rd and 4th harmonics, which a
