@@ -256,6 +256,27 @@ def test_csv_from_another_daq_with_other_column_names(tmp_path):
     np.testing.assert_allclose(c.values, s.values[:8000], rtol=1e-6, atol=1e-9)
 
 
+def test_a_time_column_written_with_too_few_digits_reads_at_its_rate(tmp_path):
+    # a 2560 Hz analyser's stamps written to 10 us: steps of 0.00039 and 0.00040 s, 2.5 % off their median,
+    # had been refused as "not uniformly sampled". Read at the slope of the stamps' least-squares line; a
+    # sample missing among them moves every later stamp a whole step off that line and is still refused
+    n = 3000
+    t = np.arange(n) / 2560.0
+    x = np.sin(2 * np.pi * 50.0 * t)
+    rows = [f"{t[i]:.5f},{x[i]:.6f},0,0" for i in range(n)]
+    path = tmp_path / "rounded.csv"
+    path.write_text("t,base,tip1,tip2\n" + "\n".join(rows) + "\n")
+    steps = np.diff(np.round(t, 5))
+    assert steps.min() == pytest.approx(0.00039) and steps.max() == pytest.approx(0.00040)
+    c = read_csv(path, time_col="t")
+    assert c.fs_hz == pytest.approx(2560.0, rel=1e-5) and len(c.t) == n
+    np.testing.assert_allclose(c.values[:, 0], np.round(x, 6))
+    holed = tmp_path / "holed.csv"
+    holed.write_text("t,base,tip1,tip2\n" + "\n".join(rows[:1500] + rows[1501:]) + "\n")
+    with pytest.raises(ValueError, match="not uniformly sampled"):
+        read_csv(holed, time_col="t")
+
+
 @pytest.mark.parametrize("content,args,match", [
     ("a,b,c\n1,2,3\n", ["--fs", "100"], "no column 'base'"),
     ("base,tip1,tip2\n1,2,3\n1,nan,3\n1,2,3\n", ["--fs", "100"], "line 3 holds NaN"),
