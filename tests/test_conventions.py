@@ -7,6 +7,7 @@ import sys
 from importlib.metadata import version
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 from scipy.io import savemat
@@ -18,6 +19,7 @@ from daq.recorder import McapRecorder
 from ident.cli.main import main as ident_main
 from replay.cli import main as replay_main
 from replay.formats import read_samples
+from replay.formats.mat import read_columns
 from replay.formats.mcap import read_recording
 
 REC = Path(__file__).resolve().parents[1] / "recordings"
@@ -129,3 +131,36 @@ def test_a_mat_file_that_is_missing_junk_or_cut_short_is_refused_in_one_line(tmp
                                                    "--response", "Acceleration2"])
         assert code == 2 and tb is None and len(err.strip().splitlines()) == 1, (path, err)
         assert str(path) in err and match in err, err
+
+
+def _matlab_v73(path: Path, variables: dict) -> None:
+    """A MAT file as MATLAB's -v7.3 writes one, through h5py (not this project's reader): an HDF5 file behind a
+    512-byte header (text, version 0x0200, 'IM'), each variable a dataset with its dimensions reversed
+    (MATLAB is column-major) and a MATLAB_class attribute."""
+    with h5py.File(path, "w", userblock_size=512) as f:
+        for name, (value, cls) in variables.items():
+            ds = f.create_dataset(name, data=np.atleast_2d(value).T)
+            ds.attrs["MATLAB_class"] = np.bytes_(cls)
+    head = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Nov 30 11:00:00 2026 HDF5 schema 1.00 ."
+    with open(path, "r+b") as fh:
+        fh.write(head.ljust(116, b" ") + b"\x00" * 8 + b"\x00\x02" + b"IM")
+
+
+def test_a_matlab_v73_file_is_read_as_matlab_shapes_it(tmp_path):
+    # MATLAB's large files (save -v7.3) are HDF5, which scipy.io.loadmat refuses ("Please use HDF reader"),
+    # and they had been refused in one line: read through h5py, with the rows of a k x N variable as
+    # NAME1..NAMEk and the rate from Fs, as a version 7 file's
+    rng = np.random.default_rng(0)
+    force, acc = rng.standard_normal(4000), rng.standard_normal((3, 4000))
+    v73, v7 = tmp_path / "big.mat", tmp_path / "small.mat"
+    _matlab_v73(v73, {"Force": (force, "double"), "Acceleration": (acc, "double"), "Fs": (400.0, "double"),
+                      "Label": (np.frombuffer("shaker".encode("utf-16-le"), np.uint16), "char")})
+    savemat(v7, {"Force": force, "Acceleration": acc, "Fs": 400.0})
+    a = read_columns(v73, ["Force", "Acceleration2"])
+    b = read_columns(v7, ["Force", "Acceleration2"])
+    assert a.fs_hz == b.fs_hz == 400.0
+    np.testing.assert_array_equal(a.matrix(["Force", "Acceleration2"]), b.matrix(["Force", "Acceleration2"]))
+    np.testing.assert_array_equal(a.matrix(["Acceleration2"])[:, 0], acc[1])
+    code, out, err, tb = run_main(ident_main, ["discover", v73, "--excitation", "Force:force",
+                                               "--response", "Label"])
+    assert code == 2 and tb is None and "no signal 'Label'" in err, err  # a char variable is no signal

@@ -1,4 +1,5 @@
-"""MATLAB files (scipy.io.loadmat / savemat): signals by variable name, the rate from ``Fs``.
+"""MATLAB files (scipy.io.loadmat / savemat; version 7.3, which is HDF5, through h5py): signals by
+variable name, the rate from ``Fs``.
 
 A ``1 x N`` (or ``N x 1``) variable is a column by its name; row i of a ``k x N`` one is ``NAMEi``,
 counted from 1 (``Acceleration2`` is row 2 of ``Acceleration``, as the F-16 benchmark names them).
@@ -10,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from pathlib import Path
 
+import h5py
 import numpy as np
 from scipy.io import loadmat, savemat
 
@@ -28,7 +30,9 @@ def _signals(path: Path) -> tuple[dict[str, np.ndarray], dict]:
         raise ValueError(f"{path}: no such file")
     try:
         mat = loadmat(path)
-    except (ValueError, TypeError, OSError, NotImplementedError, KeyError, IndexError, MemoryError) as exc:
+    except NotImplementedError:  # scipy reads versions 4 to 7; 7.3 (MATLAB's -v7.3, its large files) is HDF5
+        mat = _hdf5_variables(path)
+    except (ValueError, TypeError, OSError, KeyError, IndexError, MemoryError) as exc:
         raise ValueError(f"{path}: not a readable MAT file ({str(exc)[:80]})") from None
     signals: dict[str, np.ndarray] = {}
     for name, value in mat.items():
@@ -42,6 +46,27 @@ def _signals(path: Path) -> tuple[dict[str, np.ndarray], dict]:
             for i, row in enumerate(rows, start=1):
                 signals[f"{name}{i}"] = row
     return signals, mat
+
+
+NUMERIC = {b"double", b"single", b"int8", b"uint8", b"int16", b"uint16", b"int32", b"uint32", b"int64", b"uint64"}
+
+
+def _hdf5_variables(path: Path) -> dict[str, np.ndarray]:
+    """The numeric variables of a version 7.3 MAT file, each as MATLAB shapes it: HDF5 keeps MATLAB's
+    column-major array with its dimensions reversed (a ``1 x N`` variable is an ``N x 1`` dataset), so each
+    is transposed back. Characters, cells, structures, complex and sparse variables are left out."""
+    try:
+        with h5py.File(path, "r") as f:
+            out = {}
+            for name, item in f.items():
+                if not isinstance(item, h5py.Dataset) or item.attrs.get("MATLAB_class") not in NUMERIC:
+                    continue
+                if item.attrs.get("MATLAB_empty") or item.dtype.kind not in "fiu":
+                    continue
+                out[name] = np.asarray(item[()]).T
+            return out
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a readable MAT file (version 7.3, HDF5: {str(exc)[:80]})") from None
 
 
 def read_columns(path: str | Path, names: list[str], time_col: str | None = None,
