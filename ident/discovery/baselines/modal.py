@@ -525,7 +525,10 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
     lo, hi = prep.band
     keep = (f >= lo) & (f <= hi) & (puu > 1e-3 * puu[(f >= lo) & (f <= hi)].max())
     if keep.sum() < 8:
-        raise ValueError("the excitation has power on too few frequency lines in the band to fit a modal model")
+        raise ValueError(f"the excitation has power on {int(keep.sum())} frequency line(s) in the band, too few to fit a "
+                         "modal model (at least 8): a single sine does not show the structure's modes; give "
+                         "--model RIG.yaml for a rig model as the baseline, or --fit-data with a broadband, swept or "
+                         "stepped record of the same structure")
     f, H = f[keep], H[:, keep]
     scored = prep.measured[rows if check is None else check]
     kept, misses = None, 0
