@@ -65,7 +65,7 @@ def _hdf5_variables(path: Path) -> dict[str, np.ndarray]:
                     continue
                 out[name] = np.asarray(item[()]).T
             return out
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, MemoryError) as exc:
         raise ValueError(f"{path}: not a readable MAT file (version 7.3, HDF5: {str(exc)[:80]})") from None
 
 
