@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from discovery_fit import fitted_as_discover
 from oscillator import rk4
 
 from ident.discovery import Channel, Measurement
-from ident.discovery.signals import prepare
 
 disc = importlib.import_module("ident.discovery.discover")
 search = importlib.import_module("ident.discovery.search")
@@ -47,16 +47,8 @@ def drag():
     x, v = _integrate(u, c2)
     m = Measurement(FS, Channel("force", "force", u), (Channel("x", "displacement",
                                                                    x + 0.01 * x.std() * rng.standard_normal(u.size)),))
-    # the baseline as ``discover`` fits it (its band from a first fit, then the fit in that band)
-    band, poles0 = disc._fit_modal(m, None, None, None)
-    prep = prepare(m, band)
-    split = disc._split(prep)
-    base = disc._fit_in_band(prep, split, poles0)
-    warm = disc._warm(base, prep)
-    residual = search.baseline_residual(base, prep, split, warm)
-    rows = split.rows("train")
-    rows = rows[np.all(np.isfinite(residual[rows]), axis=1)]
-    scale = np.maximum(prep.measured[split.rows("test")].std(axis=0), 1e-300)
+    f = fitted_as_discover(m)
+    base, prep, split, warm, residual, rows, scale = f.base, f.prep, f.split, f.warm, f.residual, f.rows, f.scale
     loc = next(loc for loc in base.locations(prep) if loc.name == "x")
     lin = search.spring_damper_responses(base, prep, rows, loc, scale)
     plain, comp = search.regressions(base, prep, rows, residual, loc, "quadratic_damping", scale, compensate=lin)

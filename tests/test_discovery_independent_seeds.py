@@ -16,6 +16,7 @@ import pytest
 from scipy.signal import butter, hilbert, sosfiltfilt
 from threadpoolctl import threadpool_limits
 
+from discovery_fit import fitted_as_discover
 from daq.sim.independent.cases import discovery_case
 from ident.cli.bench_discovery import driving_sign, independent_case, judge
 from ident.discovery import discover, search
@@ -450,39 +451,32 @@ def test_reciprocity_through_the_response_that_explains_most_finds_a_chains_drag
     assert v.parameter_error < 0.5
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="a refinement starts from the joint refit alone and can end worse than the cause as "
-                          "regressed (seed 164: 0.137 against 0.094); refining from both starts (stop 71) "
-                          "gave seed 26 a false joint and gained no verdict, so it was not kept")
 def test_a_refinement_ends_no_worse_than_the_cause_as_regressed():
     # independent seed 164: a hardening cubic at tip 1 of a base-driven rig (2,500 Hz, the beams' modes at
     # 8.34 and 8.57 Hz). Its regression on the fitted baseline's residual simulates the busiest training
     # blocks better than the baseline; the linear part refitted with it in place (``joint_refit``, which fits
     # the cubic's force on the measured coordinate, not its simulation) simulates them worse than the
-    # baseline, and the refinement, which starts from that refit, ends worse still
+    # baseline, and the refinement, which starts from that refit, ends worse still: an expected failure
+    # until a fix that costs no verdict (refining from both starts, stop 71, gave seed 26 a false joint and
+    # gained none)
     c = independent_case(164)
     assert (c.cause, c.location) == ("cubic_stiffness", "tip1")
     with threadpool_limits(limits=1, user_api="blas"):
-        band, poles0 = D._fit_modal(c.measurement, None, None, None)
-        prep = prepare(c.measurement, band)
-        split = D._split(prep)
-        base = D._fit_in_band(prep, split, poles0)
-        warm = D._warm(base, prep)
-        residual = search.baseline_residual(base, prep, split, warm)
-        rows = split.rows("train")
-        rows = rows[np.all(np.isfinite(residual[rows]), axis=1)]
-        scale = np.maximum(prep.measured[split.rows("test")].std(axis=0), 1e-300)
-        loc = next(loc for loc in base.locations(prep) if loc.name == "tip1")
-        plain = search.regress(base, prep, rows, residual, loc, "cubic_stiffness", scale)
-        bound = simulation_bound(prep)
-        segs = search.busiest(prep, split, loc.weights, search.Settings().refine_blocks)
+        f = fitted_as_discover(c.measurement)
+        loc = next(loc for loc in f.base.locations(f.prep) if loc.name == "tip1")
+        plain = search.regress(f.base, f.prep, f.rows, f.residual, loc, "cubic_stiffness", f.scale)
+        bound = simulation_bound(f.prep)
+        segs = search.busiest(f.prep, f.split, loc.weights, search.Settings().refine_blocks)
 
         def error(cand):
-            return search.train_error(base, cand, prep, segs, warm, scale, bound)
+            return search.train_error(f.base, cand, f.prep, segs, f.warm, f.scale, bound)
 
         e_base = error(search.Candidate("none", "tip1", {}))
         e_plain = error(plain)
-        e_refit = error(search.joint_refit(plain, base, loc, prep, split, warm, scale))
-        ref = search.refine(plain, base, loc, prep, split, warm, scale, bound, search.Settings())
+        e_refit = error(search.joint_refit(plain, f.base, loc, f.prep, f.split, f.warm, f.scale))
+        ref = search.refine(plain, f.base, loc, f.prep, f.split, f.warm, f.scale, bound, search.Settings())
     assert e_plain < e_base < e_refit  # measured: 0.094 < 0.110 < 0.111
-    assert ref.refined and ref.train_nrmse <= e_plain  # measured: 0.137
+    assert ref.refined
+    if not ref.train_nrmse <= e_plain:  # measured: 0.137
+        pytest.xfail(f"a refinement from the joint refit alone ended at {ref.train_nrmse:.3f}, worse than the cause "
+                     f"as regressed ({e_plain:.3f})")

@@ -360,7 +360,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
               budget_notes: list[str], clip_ranges: list[float | None],
               input_notes: list[str] | None = None) -> Discovery:
     notes: list[str] = list(budget_notes) + list(input_notes or [])
-    for line in budget_notes:
+    for line in notes:
         say(line)
     say(f"{m.n} samples at {m.fs_hz:g} Hz, {len(m.responses)} responses; "
         + ("the rig model is the baseline" if rig is not None else "fitting a modal baseline, its order on held-out"
