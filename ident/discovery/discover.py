@@ -34,8 +34,8 @@ from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline
                      choose, clipped_ranges, clipping_candidates, clustered_p, compensation, gain_candidates,
                      offset_findings, paired_p, pieces_per_block, predict, refine, regress, regressions, same_sensors,
                      score, significant, simulation_bound, spring_damper_responses, train_error)
-from .signals import (ORDER, Channel, Measurement, Prepared, below_band, convert, first_family, modal_band,
-                      prepare, within_budget)
+from .signals import (ORDER, UNDRIVEN_SHARE, Channel, Measurement, Prepared, below_band, convert, first_family,
+                      modal_band, preliminary_band, prepare, undriven, within_budget)
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
 
@@ -258,8 +258,9 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
     thread, nothing with two); with one, ``ident discover``, the tests and the benchmark's Dask tasks
     agree."""
     with threadpool_limits(limits=1, user_api="blas"):
+        m, fit_data, input_notes = _undriven_left_out(m, fit_data, keep=rig is not None)
         ranges = clipped_ranges(ch.values for ch in m.responses)  # as recorded, before any decimation
-        input_notes = _input_clipped(m.excitation)
+        input_notes += _input_clipped(m.excitation)
         m, fit_data, train, test, notes = _within_budget(m, fit_data, train, test, settings.max_samples)
         try:
             return _discover(m, rig, fit_data, train, test, settings, progress or (lambda line: None), notes,
@@ -268,6 +269,35 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
             if not notes or type(exc) is not ValueError or not str(exc):
                 raise
             raise ValueError(f"{exc} (after {'; '.join(notes)})") from exc
+
+
+def _undriven_left_out(m: Measurement, fit_data: Measurement | None, keep: bool
+                       ) -> tuple[Measurement, Measurement | None, list[str]]:
+    """The record (and ``fit_data``) without the responses that carry nothing the input drives
+    (``signals.undriven``: a dead, unplugged or disconnected sensor), and the note that says so. Left in,
+    such a response is one more the baseline must fit, and it fits its noise: independent seed 75 (a contact
+    at tip 2) with tip 2 read as a constant and noise gave a baseline held out 7.7 times worse than zero and
+    a confident false finding at tip 1 (quadratic stiffness, gain 0.90). Where every response is so, or the
+    baseline is the rig model (``keep``: it needs both tips), the responses stay and the note says what the
+    record holds."""
+    dead = undriven(m, preliminary_band(m))
+    if not dead:
+        return m, fit_data, []
+    named = ", ".join(f"{m.responses[i].name} {100 * s:.0f} %" for i, s in dead)
+    why = (f"the share of the power in the band coherent with the input {m.excitation.name} is {named}, where a "
+           f"response the input drives has {100 * UNDRIVEN_SHARE[16]:.0f} % or more")
+    if len(dead) == len(m.responses):
+        return m, fit_data, [f"no response is driven by the input: {why}; is {m.excitation.name} the "
+                             "channel that drove the structure? Every gain here is measured against a baseline of "
+                             "what the input does not make"]
+    if keep:
+        return m, fit_data, [f"{why}: a dead, unplugged or disconnected sensor? The rig model needs both "
+                             "tips, so it stays in the analysis"]
+    gone = {m.responses[i].name for i, _ in dead}
+    m = replace(m, responses=tuple(ch for ch in m.responses if ch.name not in gone))
+    if fit_data is not None and any(ch.name not in gone for ch in fit_data.responses):
+        fit_data = replace(fit_data, responses=tuple(ch for ch in fit_data.responses if ch.name not in gone))
+    return m, fit_data, [f"left out {', '.join(sorted(gone))}: {why}; a dead, unplugged or disconnected sensor?"]
 
 
 def _input_clipped(excitation: Channel, share: float = 0.002, run: int = 3) -> list[str]:

@@ -34,7 +34,7 @@ from functools import lru_cache
 
 import numpy as np
 from scipy.fft import next_fast_len
-from scipy.signal import csd, find_peaks, resample_poly, welch
+from scipy.signal import coherence, csd, find_peaks, resample_poly, welch
 
 EXCITATIONS = ("force", "base_acceleration", "voltage")
 RESPONSES = ("displacement", "velocity", "acceleration")
@@ -258,6 +258,53 @@ def below_band(m: Measurement, band: tuple[float, float], share: float = 0.5) ->
             note += (f"; its strongest line, {peak:.3g} Hz, is below the {floor:.3g} Hz from which this "
                      f"{m.n / fs:.3g} s record holds {MIN_CYCLES} periods: a longer record reaches it")
         out.append(note)
+    return out
+
+
+# a response whose power in the band is no more coherent with the input than unrelated signals' is carries
+# nothing the input drives: a dead, unplugged or disconnected sensor (``undriven``). Per number of Welch
+# segments (a sixteenth, a quarter of the record), the share below which a response is so. On the
+# independent generator's 168 stationary records of seeds 0-199, each response replaced by a constant and
+# noise reaches 0.049 and 0.174 at most; the true responses 0.11 or more with sixteenths (the least: seed 3, a
+# beam hitting a stopper 240 times its stiffness, chaotic), and the F-16's 0.70. A lightly damped mode
+# decays over more than a sixteenth of a short record, which lowers its coherence there (a 4.5 Hz mode at
+# 0.5 % damping, 5 s: 0.08), not with quarters (0.59): a response is undriven only if it is at both
+UNDRIVEN_SHARE = {16: 0.08, 4: 0.25}
+
+
+def coherent_share(u: np.ndarray, y: np.ndarray, fs_hz: float, band: tuple[float, float], segments: int) -> float:
+    """The share of ``y``'s power that is coherent with ``u`` (the ordinary coherence weighted by y's
+    spectrum) over the band's lines where ``u`` carries power (1e-3 of its most or more), in Welch
+    segments of 1 / ``segments`` of the record, half overlapped. Two unrelated signals' coherence is about
+    the inverse of the number of segments averaged: a dead sensor's share stands near 0.03 with sixteenths
+    and near 0.14 with quarters, whatever the record's length."""
+    u = np.asarray(u, float)
+    y = np.asarray(y, float)
+    nper = int(2 ** np.floor(np.log2(max(64, len(u) // segments))))
+    f, g = coherence(u, y, fs_hz, nperseg=nper)
+    _, pu = welch(u, fs_hz, nperseg=nper)
+    _, py = welch(y, fs_hz, nperseg=nper)
+    lines = (f >= band[0]) & (f <= band[1])
+    if not lines.any() or not pu[lines].max() > 0:
+        return float("nan")
+    lines &= pu > 1e-3 * pu[lines].max()
+    total = float(py[lines].sum())
+    return float(np.sum(g[lines] * py[lines]) / total) if total > 0 else float("nan")
+
+
+def undriven(m: Measurement, band: tuple[float, float]) -> list[tuple[int, float]]:
+    """The responses (index, coherent share with sixteenths) that carry nothing the input drives: at each
+    segment length of ``UNDRIVEN_SHARE`` their share of power coherent with it stays below what unrelated
+    signals reach (``coherent_share``). Not judged on a hammer record (one hit: its segments' coherence
+    says nothing) or on a record shorter than 16 x 64 samples."""
+    u = np.asarray(m.excitation.values, float)
+    if m.n < max(UNDRIVEN_SHARE) * 64 or impulsive(u):
+        return []
+    out = []
+    for i, ch in enumerate(m.responses):
+        shares = {k: coherent_share(u, ch.values, m.fs_hz, band, k) for k in UNDRIVEN_SHARE}
+        if all(shares[k] < limit for k, limit in UNDRIVEN_SHARE.items()):
+            out.append((i, shares[max(UNDRIVEN_SHARE)]))
     return out
 
 
