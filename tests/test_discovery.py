@@ -186,6 +186,18 @@ def test_nan_in_the_data_is_one_line(tmp_path):
     assert tb is None and code == 2 and "NaN" in err and len(err.strip().splitlines()) == 1, (code, err, tb)
 
 
+def test_a_constant_response_is_one_line_that_says_how_to_leave_it_out(tmp_path):
+    # a sensor that reads a constant (unplugged, or its amplifier off) is refused, with the way round it
+    f = tmp_path / "d.csv"
+    t = np.arange(5000) / 500.0
+    x = np.sin(2 * np.pi * 10 * t)
+    np.savetxt(f, np.column_stack([t, x, x, np.full(t.size, 0.25)]), delimiter=",", header="t,base,tip1,tip2",
+               comments="")
+    code, _, err, tb = run_main(ident_main, ["discover", f, "--time", "t"])
+    assert tb is None and code == 2 and len(err.strip().splitlines()) == 1, (code, err, tb)
+    assert "'tip2' is constant" in err and "--response" in err
+
+
 def test_twins_need_the_independent_generator():
     code, _, err, tb = run_main(ident_main, ["bench", "discovery", "--generator", "rig", "--twins", "--cases", "1"])
     assert tb is None and code == 2 and "--twins needs the independent generator" in err

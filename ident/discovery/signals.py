@@ -92,7 +92,10 @@ class Measurement:
             if bad:
                 raise ValueError(f"{ch.name!r} holds {bad} NaN or inf samples: repair or cut them first")
             if np.ptp(x) == 0:
-                raise ValueError(f"{ch.name!r} is constant: nothing to analyse")
+                if ch is self.excitation:
+                    raise ValueError(f"the excitation {ch.name!r} is constant: nothing drove the structure")
+                raise ValueError(f"response {ch.name!r} is constant (a dead or unplugged sensor?): leave it out, "
+                                 "name the responses to analyse with --response")
         if n < 256:
             raise ValueError(f"{n} samples are too few for discovery; give at least 256")
 
