@@ -30,7 +30,7 @@ from ident.discovery.model import (Element, LinearModel, mode_states, nudging_ga
 from ident.discovery.search import (Candidate, Settings, choose, clustered_p, one_sign, paired_p, pieces_per_block,
                                     predict, signed_rank_p, significant)
 from ident.discovery.signals import (_first_motion, coherent_share, convert, first_family, force_window, frf, miso_frf,
-                                    preliminary_band, prepare, undriven, within_budget)
+                                    dropouts, preliminary_band, prepare, undriven, within_budget)
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
 
@@ -935,6 +935,36 @@ def test_a_dead_sensor_is_left_out_and_named_and_the_rest_is_analysed():
     assert kept is only and notes[0].startswith("no response is driven by the input")
     kept, _, notes = _undriven_left_out(m, None, keep=True)
     assert kept is m and "stays in the analysis" in notes[0]
+
+
+def test_a_dropout_is_left_out_and_named_and_a_quantised_sine_is_no_dropout():
+    # a one-mode oscillator (15 Hz, 2 % damping) under a random force, integrated by scipy (lsim), 1 % noise;
+    # its sensor's converter stalls for 2 s (the last value held: a loose connector reads the same). Left
+    # in, the baseline fits the step it makes and every cause is fitted to it (independent seeds 8 and 15,
+    # nothing hidden: a contact and a joint named)
+    fs = 1000.0
+    t = np.arange(0, 30, 1 / fs)
+    w = 2 * np.pi * 15.0
+    rng = np.random.default_rng(2)
+    f = lfilter(*butter(4, 60 / (fs / 2)), rng.standard_normal(t.size))
+    _, x, _ = lsim(([1.0], [1.0, 2 * 0.02 * w, w * w]), f, t)
+    x = x + 0.01 * x.std() * rng.standard_normal(x.size)
+    stalled = x.copy()
+    stalled[12000:14000] = x[11999]
+    clean = discover(Measurement(fs, Channel("force", "force", f), (Channel("x", "displacement", x),)))
+    d = discover(Measurement(fs, Channel("force", "force", f), (Channel("x", "displacement", stalled),)))
+    (note,) = [n for n in d.notes if "a dropout" in n]
+    assert note.startswith("left out blocks") and f"x reads {x[11999]:.4g} from 12.00 s to 14.00 s" in note
+    left = [d.split.blocks[k] for k in d.split.excluded]
+    assert all(any(b.start < r < b.stop for b in left) for r in (12000, 13999))  # every stalled sample's block
+    assert not d.findings and d.baseline_test_nrmse < 1.5 * clean.baseline_test_nrmse
+    # a sine quantised to 10 codes of amplitude, no noise, holds its peak's code for 14 % of a period: far
+    # less than half a period of a band that starts at 0.4 x its frequency
+    sine = np.round(10 * np.sin(2 * np.pi * 15.0 * t))
+    quiet = Measurement(fs, Channel("force", "force", f), (Channel("x", "acceleration", sine),))
+    assert dropouts(quiet, (6.0, 100.0)) == []
+    run = np.diff(np.flatnonzero(np.diff(sine) != 0)).max()
+    assert 0.1 * fs / 15.0 < run < 0.2 * fs / 15.0
 
 
 def test_multiple_input_frf_conditions_out_a_correlated_second_input():

@@ -311,6 +311,41 @@ def undriven(m: Measurement, band: tuple[float, float]) -> list[tuple[int, float
     return out
 
 
+@dataclass(frozen=True)
+class Dropout:
+    """A response that reads one value, sample for sample, from ``start_s`` to ``stop_s`` (the record's time,
+    as ``Measurement.start_s``) while the excitation moves: a loose connector, a lost sensor, a stalled
+    converter."""
+    name: str
+    start_s: float
+    stop_s: float
+    value: float
+
+    def __str__(self) -> str:
+        return f"{self.name} reads {self.value:.4g} from {self.start_s:.2f} s to {self.stop_s:.2f} s"
+
+
+def dropouts(m: Measurement, band: tuple[float, float]) -> list[Dropout]:
+    """The runs where a response reads one value for a period of the band's low edge or longer (16 samples
+    at least) while the excitation does not. A measured signal carries noise, so it never repeats a value
+    for long; a quantised one stays on its peak's code for a share of a period (a sine 100 codes high: 4.5 %
+    of it), nowhere near a period of the band's low edge, 2.5 periods of the slowest mode. A hammer record
+    is not judged: between its decays a quiet sensor may read its rest code for seconds."""
+    u = np.asarray(m.excitation.values, float)
+    if impulsive(u):
+        return []
+    run = max(16, int(np.ceil(0.5 * m.fs_hz / band[0])))
+    out = []
+    for ch in m.responses:
+        y = np.asarray(ch.values, float)
+        same = np.concatenate([[False], y[1:] == y[:-1]])  # same[i]: sample i repeats sample i - 1
+        edges = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
+        for a, b in zip(np.flatnonzero(edges == 1) - 1, np.flatnonzero(edges == -1)):
+            if b - a >= run and np.ptp(u[a:b]) > 0:
+                out.append(Dropout(ch.name, m.start_s + a / m.fs_hz, m.start_s + b / m.fs_hz, float(y[a])))
+    return out
+
+
 def modal_band(frequencies_hz: np.ndarray, fs_hz: float, n: int, harmonics: float = 4.5) -> tuple[float, float]:
     """The band a model with these modes explains: from 0.4 x the lowest mode (at least ``MIN_CYCLES``
     periods in the record) to ``harmonics`` x the highest (the drive's 3rd and 4th harmonics, which a
