@@ -4,6 +4,7 @@ as is, what replay info says about the clock and about an empty recording."""
 import re
 import subprocess
 import sys
+from argparse import Namespace
 from importlib.metadata import version
 from pathlib import Path
 
@@ -16,9 +17,10 @@ from clitools import run_main
 from daq.cli import main as daq_main
 from daq.config import load_config
 from daq.recorder import McapRecorder
+from ident.cli.discover import load_measurement
 from ident.cli.main import main as ident_main
 from replay.cli import main as replay_main
-from replay.formats import read_samples
+from replay.formats import read_columns as read_any, read_samples
 from replay.formats.mat import read_columns
 from replay.formats.mcap import read_recording
 
@@ -77,6 +79,35 @@ def test_import_reads_export_as_it_is_holes_included(tmp_path):
     assert run_main(replay_main, ["export", rec, "-o", mat])[0] == 0
     m = read_samples(mat, fill=False)
     np.testing.assert_allclose(m.values, read_samples(rec, fill=False).values, rtol=1e-12)
+
+
+def test_lost_frames_read_as_missing_values_for_discovery_wherever_they_are_kept(tmp_path):
+    """A recording that lost frames (the simulated rig drops 1 % of them) fills its holes for replay; read
+    for discovery (``gaps``) those rows are NaN, from the recording and from its CSV export (holes in the time
+    column) alike, and ``ident discover``'s reader bridges them and keeps each run, which discover leaves out."""
+    cfg = tmp_path / "drops.yaml"
+    cfg.write_text("daq:\n  faults:\n    drop_frame_rate: 0.01\n")
+    rec = tmp_path / "drops.mcap"
+    code, _, err, _ = run_main(daq_main, ["record", "--port", f"rig://?config={cfg}", "--config", cfg, "--duration",
+                                          "3", "-o", rec, "--quiet", "--no-identify"])
+    assert code == 0, err
+    filled = read_samples(rec).filled
+    assert np.count_nonzero(filled) > 30
+    names = ["base", "tip1", "tip2"]
+    assert np.isfinite(read_any(rec, names).matrix()).all()  # replay's reading: filled in
+    csv = tmp_path / "x.csv"
+    assert run_main(replay_main, ["export", rec, "--csv", csv])[0] == 0
+    with pytest.raises(ValueError, match="not uniformly sampled"):
+        read_any(csv, names, "t")  # a hole in the time column, without gaps
+    for got in (read_any(rec, names, gaps=True), read_any(csv, names, "t", gaps=True)):
+        np.testing.assert_array_equal(np.isnan(got.matrix()).any(axis=1), filled)
+    m = load_measurement(rec, Namespace(excitation="base", response=None, time_col=None, fs_hz=None))
+    assert np.isfinite(m.excitation.values).all() and all(np.isfinite(c.values).all() for c in m.responses)
+    at = np.zeros(filled.size, bool)
+    for g in m.lost:
+        at[int(round(g.start_s * m.fs_hz)):int(round(g.stop_s * m.fs_hz))] = True
+    np.testing.assert_array_equal(at, filled)
+    assert {g.name for g in m.lost} == set(names)
 
 
 def test_info_clock_drift_is_sane_or_says_why_not():

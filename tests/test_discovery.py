@@ -16,6 +16,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy.signal import butter, lfilter, lsim
 
 from clitools import run_main
 from daq.sim.hidden import hidden_case
@@ -176,14 +177,22 @@ def test_bad_arguments_are_one_line_exit_2(args, match):
     assert tb is None and code == 2 and match in err and len(err.strip().splitlines()) == 1, (code, err, tb)
 
 
-def test_nan_in_the_data_is_one_line(tmp_path):
+def test_nan_that_no_bridge_can_span_is_one_line(tmp_path):
+    # a missing value in a channel is bridged (``test_missing_values_in_a_table_are_bridged_...``); a time
+    # stamp that is not a number, or a channel with no number at all, is refused in one line
     f = tmp_path / "d.csv"
     t = np.arange(5000) / 500.0
     x = np.sin(2 * np.pi * 10 * t)
-    x[100] = np.nan
-    np.savetxt(f, np.column_stack([t, x, x, x]), delimiter=",", header="t,base,tip1,tip2", comments="")
+    tt = t.copy()
+    tt[100] = np.nan
+    np.savetxt(f, np.column_stack([tt, x, x, x]), delimiter=",", header="t,base,tip1,tip2", comments="")
     code, _, err, tb = run_main(ident_main, ["discover", f, "--time", "t"])
-    assert tb is None and code == 2 and "NaN" in err and len(err.strip().splitlines()) == 1, (code, err, tb)
+    assert tb is None and code == 2 and "line 102 holds NaN" in err and len(err.strip().splitlines()) == 1, err
+    np.savetxt(f, np.column_stack([t, x, x, np.full(t.size, np.nan)]), delimiter=",", header="t,base,tip1,tip2",
+               comments="")
+    code, _, err, tb = run_main(ident_main, ["discover", f, "--time", "t"])
+    assert tb is None and code == 2 and "'tip2' holds no number" in err and "--response" in err, err
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_a_constant_response_is_one_line_that_says_how_to_leave_it_out(tmp_path):
@@ -196,6 +205,35 @@ def test_a_constant_response_is_one_line_that_says_how_to_leave_it_out(tmp_path)
     code, _, err, tb = run_main(ident_main, ["discover", f, "--time", "t"])
     assert tb is None and code == 2 and len(err.strip().splitlines()) == 1, (code, err, tb)
     assert "'tip2' is constant" in err and "--response" in err
+
+
+def test_missing_values_in_a_table_are_bridged_and_their_blocks_left_out(tmp_path):
+    # a one-mode oscillator (15 Hz, 2 % damping) under a random force, integrated by scipy (lsim), as a
+    # logger exports it with lost packets: a run of NaN cells, a run of empty cells, and rows missing from
+    # its time column. Refused before ("line 12002 holds NaN or inf"); each is now a dropout, named, bridged
+    # and left out, and the record analysed
+    fs = 1000.0
+    t = np.arange(0, 30, 1 / fs)
+    w = 2 * np.pi * 15.0
+    rng = np.random.default_rng(2)
+    f = lfilter(*butter(4, 60 / (fs / 2)), rng.standard_normal(t.size))
+    _, x, _ = lsim(([1.0], [1.0, 2 * 0.02 * w, w * w]), f, t)
+    x = x + 0.01 * x.std() * rng.standard_normal(x.size)
+    cells = [f"{v:.6g}" for v in x]
+    cells[6000:6030] = ["NaN"] * 30
+    cells[12000:12050] = [""] * 50
+    keep = np.ones(t.size, bool)
+    keep[20000:20020] = False  # 20 rows lost: the time column jumps by 21 steps
+    path = tmp_path / "lost.csv"
+    path.write_text("t,force,x\n" + "".join(f"{t[i]:.6f},{f[i]:.6g},{cells[i]}\n" for i in np.flatnonzero(keep)))
+    code, out, err, tb = run_main(ident_main, ["discover", path, "--time", "t", "--excitation", "force:force",
+                                               "--response", "x:displacement"])
+    assert tb is None and code == 0, (code, err, tb)
+    (note,) = [line for line in out.splitlines() if "a dropout" in line]
+    for span in ("x holds no number from 6.00 s to 6.03 s", "x holds no number from 12.00 s to 12.05 s",
+                 "force holds no number from 20.00 s to 20.02 s", "x holds no number from 20.00 s to 20.02 s"):
+        assert span in note, note
+    assert "nothing found" in out
 
 
 def test_twins_need_the_independent_generator():

@@ -959,12 +959,17 @@ def test_a_dropout_is_left_out_and_named_and_a_quantised_sine_is_no_dropout():
     assert all(any(b.start < r < b.stop for b in left) for r in (12000, 13999))  # every stalled sample's block
     assert not d.findings and d.baseline_test_nrmse < 1.5 * clean.baseline_test_nrmse
     # a sine quantised to 10 codes of amplitude, no noise, holds its peak's code for 14 % of a period: far
-    # less than half a period of a band that starts at 0.4 x its frequency
+    # less than half a period of a band that starts at 0.4 x its frequency (84 samples here)
     sine = np.round(10 * np.sin(2 * np.pi * 15.0 * t))
     quiet = Measurement(fs, Channel("force", "force", f), (Channel("x", "acceleration", sine),))
     assert dropouts(quiet, (6.0, 100.0)) == []
     run = np.diff(np.flatnonzero(np.diff(sine) != 0)).max()
     assert 0.1 * fs / 15.0 < run < 0.2 * fs / 15.0
+    # nor a quiet start too small for the converter: the sine rising over 5 s reads 0 for its first 0.25 s
+    # (three periods of the band's low edge) while the input moves, then a code or two
+    rising = np.round(10 * np.minimum(t / 5.0, 1.0) * np.sin(2 * np.pi * 15.0 * t))
+    assert np.flatnonzero(rising)[0] > 0.2 * fs
+    assert dropouts(replace(quiet, responses=(Channel("x", "acceleration", rising),)), (6.0, 100.0)) == []
 
 
 def test_multiple_input_frf_conditions_out_a_correlated_second_input():

@@ -22,13 +22,13 @@ import numpy as np
 from scipy.signal import welch
 from daq.config import read_yaml_file
 from daq.safeio import Output, check_outputs, safe_folder, safe_output
-from replay.formats import format_of, mcap, read_column_matrix, read_samples
+from replay.formats import read_column_matrix
 
 from . import number, parse_split
 from ..config import build
 from ..discovery import Channel, Discovery, Measurement, discover, to_json
 from ..discovery.search import Settings, predict
-from ..discovery.signals import EXCITATIONS, MAX_SAMPLES, RESPONSES
+from ..discovery.signals import EXCITATIONS, MAX_SAMPLES, RESPONSES, bridged
 from ..rig import RigParams
 
 matplotlib.use("Agg")
@@ -87,17 +87,11 @@ def load_measurement(path: Path, args) -> Measurement:
     exc = _spec(args.excitation, EXCITATIONS, "base_acceleration", "excitation")
     resp = [_spec(r, RESPONSES, "acceleration", "response") for r in (args.response or ["tip1", "tip2"])]
     cols = [exc[0]] + [c for c, _ in resp]
-    if format_of(path) is not mcap:  # CSV, MAT, UFF 58, TDMS: columns by name
-        data, fs = read_column_matrix(path, cols, args.time_col, args.fs_hz)
-    else:
-        s = read_samples(path)
-        roles = {"base": 0, "tip1": 1, "tip2": 2}
-        missing = [c for c in cols if c not in roles]
-        if missing:
-            raise ValueError(f"a recording has the channels base, tip1, tip2; not {missing[0]!r}")
-        data, fs = s.values[:, [roles[c] for c in cols]], s.fs_hz
-    return Measurement(float(fs), Channel(exc[0], exc[1], data[:, 0]),
-                       tuple(Channel(c, k, data[:, 1 + i]) for i, (c, k) in enumerate(resp)))
+    # NaN where a value is missing (a recording's lost frames, a table's empty or NaN cells, a time column's
+    # holes): bridged here, and the blocks they reach left out by discover as a dropout's
+    data, fs = read_column_matrix(path, cols, args.time_col, args.fs_hz, gaps=True)
+    return bridged(float(fs), Channel(exc[0], exc[1], data[:, 0]),
+                   tuple(Channel(c, k, data[:, 1 + i]) for i, (c, k) in enumerate(resp)))
 
 
 def run(args) -> int:

@@ -43,6 +43,7 @@ PIECE_PERIODS = 5  # periods of the slowest mode per piece of the paired test
 QUIET_CHECK = 0.97  # held-back blocks no model predicts better than this share of zero's error hold no response
 CLEARLY_BETTER = 0.95  # a regression simulating the training blocks within 95 % of the baseline's error
 BLOCK_PERIODS = 4.0  # periods of the slowest mode per block (the band's low edge is 0.4 x that mode)
+WHAT_DROPS = "a dropout (a loose connector, a lost sensor, a stalled converter, lost packets)"
 
 
 def _warm(baseline: Baseline, prep: Prepared) -> int:
@@ -260,8 +261,10 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
     with threadpool_limits(limits=1, user_api="blas"):
         m, fit_data, input_notes = _undriven_left_out(m, fit_data, keep=rig is not None)
         ranges = clipped_ranges(ch.values for ch in m.responses)  # as recorded, before any decimation
-        gaps = dropouts(m, preliminary_band(m))  # as recorded: a decimated run is no longer one value
+        gaps = list(m.lost) + dropouts(m, preliminary_band(m))  # as recorded: decimated, a run is no longer one value
         input_notes += _input_clipped(m.excitation)
+        if fit_data is not None and fit_data.lost:
+            input_notes.append("fit data: " + "; ".join(str(g) for g in fit_data.lost) + ", and fitted so")
         m, fit_data, train, test, notes = _within_budget(m, fit_data, train, test, settings.max_samples)
         try:
             return _discover(m, rig, fit_data, train, test, settings, progress or (lambda line: None), notes,
@@ -310,7 +313,7 @@ def _dropout_spans(prep: Prepared, gaps: list[Dropout], after: int) -> list[tupl
 
 def _without_dropouts(split: Split, prep: Prepared, gaps: list[Dropout], warm: int) -> tuple[Split, list[str]]:
     """The split without the blocks a dropout reaches (``signals.dropouts``: a response that reads one
-    value while the excitation moves), and the note that says so. A dropout reaches the blocks within the
+    value while the excitation moves; ``Measurement.lost``: one that held no number), and the note that says so. A dropout reaches the blocks within the
     band-pass's edge of it, and those whose simulation starts from a warm-up (``warm`` samples) that reads
     it. Left in, the baseline fits the step it makes and every cause is fitted to it: independent seeds 8
     and 15 ("none") with a response read as 0 for 2 s got a contact (gain 0.061) and a joint (0.054). Where
@@ -320,11 +323,9 @@ def _without_dropouts(split: Split, prep: Prepared, gaps: list[Dropout], warm: i
     hit = blocks_reached(split, _dropout_spans(prep, gaps, warm))
     said = "; ".join(str(g) for g in gaps)
     if len(hit) > len(split.blocks) // 3:
-        return split, [f"{said}, while the excitation moves: a dropout (a loose connector, a lost sensor or a stalled "
-                       f"converter) that reaches {len(hit)} of {len(split.blocks)} blocks, too many to leave out: "
-                       "cut the record around it (--train, --test)"]
-    return split.without(hit), [f"left out blocks {hit}: {said}, while the excitation moves: a dropout (a loose "
-                                "connector, a lost sensor or a stalled converter)"]
+        return split, [f"{said}: {WHAT_DROPS} that reaches {len(hit)} of {len(split.blocks)} blocks, too many to "
+                       "leave out: cut the record around it (--train, --test)"]
+    return split.without(hit), [f"left out blocks {hit}: {said}: {WHAT_DROPS}"]
 
 
 def _input_clipped(excitation: Channel, share: float = 0.002, run: int = 3) -> list[str]:
@@ -460,7 +461,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     resid_all = np.full((prep.n, len(prep.names)), np.nan)
     for seg in split.blocks:
         resid_all[seg] = prep.measured[seg] - predict(baseline, baseline.model, prep, seg, warm, past=prep.edge)
-    for a, b in _dropout_spans(prep, gaps, 0):  # a dropout's step is no blow (a blow after it still is one)
+    for a, b in _dropout_spans(prep, gaps, warm):  # a dropout's step is no blow, nor a block started from it
         resid_all[max(a, 0):max(b, 0)] = 0.0
     period = max(4, int(prep.fs_hz / f_min))
     rows = rows_of(split.blocks)

@@ -65,6 +65,8 @@ class Measurement:
     excitation: Channel
     responses: tuple[Channel, ...]
     start_s: float = 0.0  # where the first sample lies in the record it was taken from (an excerpt's offset)
+    # runs where a response held no number, bridged by interpolation (``bridged``): dropouts to discovery
+    lost: tuple = ()
 
     def __post_init__(self):
         if not (np.isfinite(self.fs_hz) and self.fs_hz > 0):
@@ -322,7 +324,34 @@ class Dropout:
     value: float
 
     def __str__(self) -> str:
-        return f"{self.name} reads {self.value:.4g} from {self.start_s:.2f} s to {self.stop_s:.2f} s"
+        span = f"from {self.start_s:.2f} s to {self.stop_s:.2f} s"
+        if np.isnan(self.value):
+            return f"{self.name} holds no number {span} (bridged by interpolation)"
+        return f"{self.name} reads {self.value:.4g} {span} while the excitation moves"
+
+
+def bridged(fs_hz: float, excitation: Channel, responses: tuple[Channel, ...], start_s: float = 0.0) -> Measurement:
+    """A measurement whose channels' runs of NaN or inf samples (a recording's lost frames, a logger's lost
+    packets, an export's empty cells) are bridged by linear interpolation and kept as ``Measurement.lost``:
+    discovery leaves the blocks they reach out, as a dropout's (the excitation's too: a model driven
+    through the bridge is not driven by what the structure felt there)."""
+    kept, lost = [], []
+    for ch in (excitation,) + tuple(responses):
+        y = np.array(ch.values, float)
+        bad = ~np.isfinite(y) if y.ndim == 1 else np.zeros(y.shape, bool)
+        if bad.all() and y.size:
+            if ch is excitation:
+                raise ValueError(f"the excitation {ch.name!r} holds no number")
+            raise ValueError(f"response {ch.name!r} holds no number: leave it out, name the responses to analyse "
+                             "with --response")
+        if bad.any():
+            at = np.arange(y.size)
+            y[bad] = np.interp(at[bad], at[~bad], y[~bad])
+            edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
+            lost += [Dropout(ch.name, start_s + a / fs_hz, start_s + b / fs_hz, float("nan"))
+                     for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+        kept.append(Channel(ch.name, ch.kind, y))
+    return Measurement(fs_hz, kept[0], tuple(kept[1:]), start_s, tuple(lost))
 
 
 def dropouts(m: Measurement, band: tuple[float, float]) -> list[Dropout]:
@@ -340,8 +369,15 @@ def dropouts(m: Measurement, band: tuple[float, float]) -> list[Dropout]:
         y = np.asarray(ch.values, float)
         same = np.concatenate([[False], y[1:] == y[:-1]])  # same[i]: sample i repeats sample i - 1
         edges = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
+        steps = np.diff(np.unique(y))
+        code = float(steps.min()) if steps.size else 0.0  # the channel's resolution
         for a, b in zip(np.flatnonzero(edges == 1) - 1, np.flatnonzero(edges == -1)):
-            if b - a >= run and np.ptp(u[a:b]) > 0:
+            if b - a < run or not np.ptp(u[a:b]) > 0:
+                continue
+            # around a dropout the response moves by many codes; a motion too small for the converter (a
+            # quiet start read on few bits) reads one code while the input moves and moves a code or two after
+            around = np.concatenate([y[max(0, a - run):a], y[b:b + run]])
+            if around.size and np.std(around) > 3.0 * code:
                 out.append(Dropout(ch.name, m.start_s + a / m.fs_hz, m.start_s + b / m.fs_hz, float(y[a])))
     return out
 
@@ -708,7 +744,7 @@ class Excerpt:
 def _each_channel(m: Measurement, f, fs_hz: float, start_s: float) -> Measurement:
     """``m`` with ``f`` applied to every channel's values."""
     ch = lambda c: Channel(c.name, c.kind, f(np.asarray(c.values, float)))  # noqa: E731
-    return Measurement(fs_hz, ch(m.excitation), tuple(ch(c) for c in m.responses), start_s)
+    return Measurement(fs_hz, ch(m.excitation), tuple(ch(c) for c in m.responses), start_s, m.lost)
 
 
 def _decimated(m: Measurement, q: int) -> Measurement:

@@ -9,7 +9,7 @@
 | ``.tdms`` | :mod:`replay.formats.tdms` | samples, columns (NI TDMS channels) | samples (``replay export``) |
 
 Each module has ``read_samples(path, **options) -> Samples``, ``read_columns(path, names, time_col,
-fs_hz) -> Columns`` and ``write_samples(path, samples, force=, inputs=)``; :func:`read_samples`,
+fs_hz, gaps) -> Columns`` and ``write_samples(path, samples, force=, inputs=)``; :func:`read_samples`,
 :func:`read_columns` and :func:`write_samples` here pick the module by suffix. ``replay``, ``ident fit``,
 ``ident discover`` and ``daq bench`` read through here.
 """
@@ -51,15 +51,16 @@ def read_samples(path: str | Path, **options) -> Samples:
 
 
 def read_columns(path: str | Path, names: list[str], time_col: str | None = None,
-                 fs_hz: float | None = None) -> Columns:
-    """Named signals ({name: array}) and their rate."""
-    return format_of(path).read_columns(path, list(names), time_col, fs_hz)
+                 fs_hz: float | None = None, gaps: bool = False) -> Columns:
+    """Named signals ({name: array}) and their rate; with ``gaps``, NaN where a value is missing (a lost
+    frame, an empty or NaN cell, a hole in a time column) instead of an error."""
+    return format_of(path).read_columns(path, list(names), time_col, fs_hz, gaps)
 
 
 def read_column_matrix(path: str | Path, names: list[str], time_col: str | None = None,
-                       fs_hz: float | None = None) -> tuple[np.ndarray, float]:
+                       fs_hz: float | None = None, gaps: bool = False) -> tuple[np.ndarray, float]:
     """Named signals as one (n, len(names)) array, and the rate."""
-    c = read_columns(path, names, time_col, fs_hz)
+    c = read_columns(path, names, time_col, fs_hz, gaps)
     return c.matrix(list(names)), c.fs_hz
 
 

@@ -77,6 +77,17 @@ def on_grid(index: np.ndarray, values: np.ndarray, seq: np.ndarray | None, fs_hz
     return Samples(full / fs_hz, vals, fs_hz, seq_full, source, **extra)
 
 
+def missing_refused(path, data: np.ndarray, gaps: bool, where=lambda i: f"sample {i}",
+                    fix: str = "") -> np.ndarray:
+    """``data`` (n, k) when every value is a number; else, with ``gaps``, as it is (NaN where a value is
+    missing: its reader, ``ident discover``, bridges and leaves such runs out), and without, refused with
+    the first row that holds one (``where``: how the format names a row)."""
+    bad = ~np.isfinite(data).all(axis=1)
+    if bad.any() and not gaps:
+        raise ValueError(f"{path}: {where(int(np.argmax(bad)))} holds NaN or inf{fix}")
+    return data
+
+
 def check_rate(fs_hz: float | None, what: str = "--fs") -> float:
     if fs_hz is None or not (1e-3 <= fs_hz <= 1e6):
         raise ValueError(f"{what} must be a sampling rate from 0.001 Hz to 1 MHz, got {fs_hz}")

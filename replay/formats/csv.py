@@ -16,7 +16,7 @@ import numpy as np
 
 from daq.safeio import safe_output
 
-from .base import Columns, Samples, check_rate, on_grid
+from .base import Columns, Samples, check_rate, missing_refused, on_grid
 
 SUFFIXES = (".csv", ".txt")
 TIME_NAMES = ("t", "time", "time_s", "t_s")
@@ -37,8 +37,16 @@ def _rows(path: Path) -> list[list[str]]:
         raise ValueError(f"{path}: not a text CSV file ({str(exc)[:60]})") from None
 
 
-def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | None):
-    """(header, data (n, k) for [time_col] + columns, time_col used)."""
+def _number(cell: str, blank: float | None) -> float:
+    """A cell's number; an empty cell is ``blank`` where that is given (a missing value), else an error."""
+    if blank is not None and not cell.strip():
+        return blank
+    return float(cell)
+
+
+def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | None, gaps: bool = False):
+    """(data (n, k) for [time_col] + columns, time_col used); with ``gaps``, an empty value cell is NaN (the
+    time column must be whole)."""
     rows = _rows(path)
     if not rows:
         raise ValueError(f"{path}: empty file; expected a header row and data")
@@ -54,18 +62,20 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
     if missing:
         raise ValueError(f"{path}: no column {missing[0]!r}; columns are: {', '.join(header)}")
     idx = [header.index(c) for c in wanted]
+    blank = [None if time_col and j == 0 else (np.nan if gaps else None) for j in range(len(idx))]
     data = np.empty((len(rows) - 1, len(idx)))
     for r, row in enumerate(rows[1:], start=2):
         try:
-            data[r - 2] = [float(row[i]) for i in idx]
+            data[r - 2] = [_number(row[i], b) for i, b in zip(idx, blank)]
         except (ValueError, IndexError):
             raise ValueError(f"{path}: line {r} has a missing or non-numeric value in columns "
                              f"{', '.join(wanted)}") from None
     if len(data) < 2:
         raise ValueError(f"{path}: needs at least two data rows")
-    bad = ~np.isfinite(data).all(axis=1)
-    if bad.any():
-        raise ValueError(f"{path}: line {int(np.argmax(bad)) + 2} holds NaN or inf; repair or remove it")
+    where = lambda i: f"line {i + 2}"  # noqa: E731
+    if time_col:
+        missing_refused(path, data[:, :1], False, where, "; repair or remove it")
+    missing_refused(path, data, gaps, where, "; repair or remove it")
     return data, time_col
 
 
@@ -102,15 +112,20 @@ def _rounded_step(t: np.ndarray) -> float | None:
 
 
 def read_columns(path: str | Path, names: list[str], time_col: str | None = None,
-                 fs_hz: float | None = None) -> Columns:
-    """The named columns as floats and the sampling rate (a time column must be uniform here: no holes)."""
+                 fs_hz: float | None = None, gaps: bool = False) -> Columns:
+    """The named columns as floats and the sampling rate (a time column must be uniform here: no holes;
+    with ``gaps``, a hole of whole steps is rows of NaN, and an empty value cell NaN)."""
     path = Path(path)
     if fs_hz is not None:
         check_rate(fs_hz)
-    data, time_col = _table(path, list(names), time_col, fs_hz)
+    data, time_col = _table(path, list(names), time_col, fs_hz, gaps)
     if time_col is None:
         return Columns({c: data[:, j] for j, c in enumerate(names)}, float(fs_hz), str(path))
     index, fs = _grid(path, data[:, 0], time_col)
+    if gaps and index[-1] != len(index) - 1:
+        full = np.full((int(index[-1]) + 1, len(names)), np.nan)
+        full[index] = data[:, 1:]
+        return Columns({c: full[:, j] for j, c in enumerate(names)}, fs, str(path))
     if index[-1] != len(index) - 1:
         dt = np.diff(data[:, 0])
         raise ValueError(f"{path}: column {time_col!r} is not uniformly sampled (steps from "

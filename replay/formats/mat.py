@@ -17,7 +17,7 @@ from scipy.io import loadmat, savemat
 
 from daq.safeio import safe_output
 
-from .base import Columns, Samples, check_rate
+from .base import Columns, Samples, check_rate, missing_refused
 
 SUFFIXES = (".mat",)
 
@@ -70,7 +70,7 @@ def _hdf5_variables(path: Path) -> dict[str, np.ndarray]:
 
 
 def read_columns(path: str | Path, names: list[str], time_col: str | None = None,
-                 fs_hz: float | None = None) -> Columns:
+                 fs_hz: float | None = None, gaps: bool = False) -> Columns:
     """Named signals as floats, and the rate (``fs_hz`` or the file's ``Fs``)."""
     path = Path(path)
     if time_col is not None:
@@ -83,8 +83,7 @@ def read_columns(path: str | Path, names: list[str], time_col: str | None = None
     if len(n) != 1:
         raise ValueError(f"{path}: signals {', '.join(names)} differ in length")
     data = np.column_stack([signals[c] for c in names])
-    if not np.all(np.isfinite(data)):
-        raise ValueError(f"{path}: sample {int(np.argmax(~np.isfinite(data).all(axis=1)))} holds NaN or inf")
+    data = missing_refused(path, data, gaps)
     if fs_hz is None:
         fs = np.asarray(mat.get("Fs", np.nan), float).ravel()
         if fs.size != 1 or not fs[0] > 0:

@@ -795,15 +795,17 @@ def read_samples(path: str | Path, *, fill: bool = True, **unused) -> Samples:
 
 
 def read_columns(path: str | Path, names: list[str], time_col: str | None = None,
-                 fs_hz: float | None = None) -> Columns:
-    """Channels base, tip1, tip2 of a recording by name."""
+                 fs_hz: float | None = None, gaps: bool = False) -> Columns:
+    """Channels base, tip1, tip2 of a recording by name; with ``gaps``, NaN on the rows of lost frames
+    (else interpolated over them, as ``read_samples`` fills them)."""
     if time_col is not None or fs_hz is not None:
         raise ValueError("--time and --fs are for CSV files; a recording carries its own times")
     bad = [c for c in names if c not in CHANNELS]
     if bad:
         raise ValueError(f"a recording has the channels base, tip1, tip2; not {bad[0]!r}")
     smp = read_samples(path)
-    return Columns({c: smp.values[:, CHANNELS.index(c)] for c in names}, smp.fs_hz, str(path))
+    values = np.where(smp.filled[:, None], np.nan, smp.values) if gaps else smp.values
+    return Columns({c: values[:, CHANNELS.index(c)] for c in names}, smp.fs_hz, str(path))
 
 
 # ---------------------------------------------------------------------------------------- writer

@@ -24,7 +24,7 @@ from nptdms import ChannelObject, GroupObject, RootObject, TdmsFile, TdmsWriter
 
 from daq.safeio import safe_output
 
-from .base import Columns, Samples, check_rate, even_grid
+from .base import Columns, Samples, check_rate, even_grid, missing_refused
 from .uff import CHANNELS, unit_factor
 
 SUFFIXES = (".tdms",)
@@ -73,7 +73,7 @@ def _channels(path: Path) -> dict[str, dict]:
 
 
 def read_columns(path: str | Path, names: list[str], time_col: str | None = None,
-                 fs_hz: float | None = None) -> Columns:
+                 fs_hz: float | None = None, gaps: bool = False) -> Columns:
     """Named channels as floats and their rate (``fs_hz``, the waveform increment, or a time channel)."""
     path = Path(path)
     chans = _channels(path)
@@ -85,8 +85,7 @@ def read_columns(path: str | Path, names: list[str], time_col: str | None = None
     if len({chans[c]["data"].size for c in wanted}) != 1:
         raise ValueError(f"{path}: channels {', '.join(wanted)} differ in length")
     data = np.column_stack([chans[c]["data"] for c in names])
-    if not np.all(np.isfinite(data)):
-        raise ValueError(f"{path}: sample {int(np.argmax(~np.isfinite(data).all(axis=1)))} holds NaN or inf")
+    data = missing_refused(path, data, gaps)
     if fs_hz is not None and time_col is not None:
         raise ValueError("give --fs or --time, not both")
     if fs_hz is not None:

@@ -29,7 +29,7 @@ import pyuff
 
 from daq.safeio import safe_output
 
-from .base import Columns, Samples, check_rate, even_grid
+from .base import Columns, Samples, check_rate, even_grid, missing_refused
 
 SUFFIXES = (".uff", ".unv")
 MAX_BYTES = 4 << 30
@@ -108,7 +108,7 @@ def _channels(path: Path) -> dict[str, dict]:
 
 
 def read_columns(path: str | Path, names: list[str], time_col: str | None = None,
-                 fs_hz: float | None = None) -> Columns:
+                 fs_hz: float | None = None, gaps: bool = False) -> Columns:
     """Named time histories as floats and their rate (``fs_hz`` overrides the file's)."""
     path = Path(path)
     if time_col is not None:
@@ -123,8 +123,7 @@ def read_columns(path: str | Path, names: list[str], time_col: str | None = None
     if len({p["fs"] for p in picked}) != 1 or len({p["start"] for p in picked}) != 1:
         raise ValueError(f"{path}: channels {', '.join(names)} differ in rate or start time")
     data = np.column_stack([p["data"] for p in picked])
-    if not np.all(np.isfinite(data)):
-        raise ValueError(f"{path}: sample {int(np.argmax(~np.isfinite(data).all(axis=1)))} holds NaN or inf")
+    data = missing_refused(path, data, gaps)
     fs = check_rate(fs_hz if fs_hz is not None else picked[0]["fs"],
                     "--fs" if fs_hz is not None else "the abscissa increment's rate")
     return Columns({c: data[:, j] for j, c in enumerate(names)}, fs, str(path))
