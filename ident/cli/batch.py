@@ -44,8 +44,9 @@ from replay.formats import FORMATS, format_of, mcap, read_samples
 
 from ..jsonsafe import finite
 from ..campaign import fit_beams, regime_durations, regime_record
-from ..discovery import Channel, Measurement, discover
+from ..discovery import Channel, discover
 from ..discovery.result import candidate_json
+from ..discovery.signals import bridged
 from ..live.regimes import MIN_PERIODS, RegimeConfig
 from ..rig import RigParams
 from . import DURATION, OFFSET, RATE_HZ, REGIME_WINDOW
@@ -161,9 +162,9 @@ def _fit(s, settings: Settings) -> dict:
 
 
 def _discover(s, settings: Settings) -> dict:
-    v = s.values
-    m = Measurement(float(s.fs_hz), Channel("base", "base_acceleration", v[:, 0]),
-                    (Channel("tip1", "acceleration", v[:, 1]), Channel("tip2", "acceleration", v[:, 2])))
+    v = np.where(s.filled[:, None], np.nan, s.values)  # lost frames are missing, not measured: bridged, left out
+    m = bridged(float(s.fs_hz), Channel("base", "base_acceleration", v[:, 0]),
+                (Channel("tip1", "acceleration", v[:, 1]), Channel("tip2", "acceleration", v[:, 2])))
     d = discover(m, rig=settings.model)
     findings = [{**candidate_json(c, m.fs_hz), "ambiguous_with": [a.label for a in alike]}
                 for c, alike in zip(d.findings, d.ambiguous)]
