@@ -277,6 +277,27 @@ def test_a_time_column_written_with_too_few_digits_reads_at_its_rate(tmp_path):
         read_csv(holed, time_col="t")
 
 
+def test_a_table_separated_by_semicolons_tabs_or_blanks_reads_as_its_comma_separated_twin(tmp_path):
+    # a European spreadsheet's export (semicolons, decimal commas), a LabVIEW text export (tabs) and an
+    # analyser's aligned columns had been refused as "no column 't'; columns are: t;base;tip1;tip2"
+    n = 400
+    t = np.arange(n) / 1000.0
+    v = np.column_stack([np.sin(2 * np.pi * 30 * t), 1e-4 * np.cos(2 * np.pi * 30 * t), -2.5e3 * t])
+    cells = [[f"{t[i]:.3f}"] + [f"{x:.6g}" for x in v[i]] for i in range(n)]
+    header = ["t", "base", "tip1", "tip2"]
+    forms = {"comma.csv": (",", "."), "semicolon.csv": (";", ","), "tab.txt": ("\t", "."),
+             "blanks.txt": ("   ", ".")}
+    for name, (sep, dec) in forms.items():
+        (tmp_path / name).write_text("\n".join(sep.join(c.replace(".", dec) for c in row)
+                                              for row in [header] + cells) + "\n")
+    want = read_csv(tmp_path / "comma.csv", time_col="t")
+    assert want.fs_hz == pytest.approx(1000.0)
+    np.testing.assert_allclose(want.values, v, rtol=1e-5)
+    for name in forms:
+        got = read_csv(tmp_path / name, time_col="t")
+        assert got.fs_hz == want.fs_hz and np.array_equal(got.values, want.values), name
+
+
 @pytest.mark.parametrize("content,args,match", [
     ("a,b,c\n1,2,3\n", ["--fs", "100"], "no column 'base'"),
     ("base,tip1,tip2\n1,2,3\n1,nan,3\n1,2,3\n", ["--fs", "100"], "line 3 holds NaN"),

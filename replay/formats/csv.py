@@ -3,7 +3,9 @@
 Times come from a time column (``--time COL``; found by itself when a column is named ``t``, ``time``,
 ``time_s`` or ``t_s`` and neither ``--time`` nor ``--fs`` is given) or from a rate (``--fs HZ``). A time
 column must be uniform within 1 %, except for holes of whole steps (frames a recording lost), which are
-filled like a recording's. Every error names the file and the line or column.
+filled like a recording's. Cells are separated by commas, by semicolons (numbers then may carry a decimal
+comma), by tabs or by aligned blanks: what other labs' spreadsheets and analysers export. Every error names
+the file and the line or column.
 """
 
 from __future__ import annotations
@@ -20,34 +22,51 @@ from .base import Columns, Samples, check_rate, missing_refused, on_grid
 
 SUFFIXES = (".csv", ".txt")
 TIME_NAMES = ("t", "time", "time_s", "t_s")
+DELIMITERS = (",", ";", "\t")
 MAX_BYTES = 4 << 30
 
 
-def _rows(path: Path) -> list[list[str]]:
+def _rows(path: Path) -> tuple[list[list[str]], bool]:
+    """The file's rows of cells, and whether its numbers are written with a decimal comma. The delimiter is
+    the one of ``DELIMITERS`` that splits the header row into the most columns (a comma on a tie), else
+    runs of blanks where they split it: a European spreadsheet's ``t;force;x`` with ``0,0015``, a
+    LabVIEW or analyser text export's tabs or aligned columns read as they are. A decimal comma is one
+    in a data cell where the delimiter is not a comma."""
     try:
         if path.stat().st_size > MAX_BYTES:
             raise ValueError(f"{path}: larger than {MAX_BYTES >> 30} GiB")
         with open(path, newline="") as fh:
-            return list(csv.reader(fh))
+            first = fh.readline()
+            fh.seek(0)
+            counts = {d: first.count(d) for d in DELIMITERS}
+            delimiter = max(DELIMITERS, key=lambda d: (counts[d], d == ","))
+            if counts[delimiter] == 0 and len(first.split()) > 1:
+                rows = [line.split() for line in fh if line.strip()]
+                delimiter = " "
+            else:
+                rows = list(csv.reader(fh, delimiter=delimiter))
     except FileNotFoundError:
         raise ValueError(f"{path}: no such file") from None
     except IsADirectoryError:
         raise ValueError(f"{path}: is a folder; give a CSV file") from None
     except (UnicodeDecodeError, csv.Error) as exc:
         raise ValueError(f"{path}: not a text CSV file ({str(exc)[:60]})") from None
+    comma = delimiter != "," and any("," in cell for row in rows[1:3] for cell in row)
+    return rows, comma
 
 
-def _number(cell: str, blank: float | None) -> float:
-    """A cell's number; an empty cell is ``blank`` where that is given (a missing value), else an error."""
+def _number(cell: str, blank: float | None, comma: bool = False) -> float:
+    """A cell's number (``comma``: written with a decimal comma); an empty cell is ``blank`` where that is
+    given (a missing value), else an error."""
     if blank is not None and not cell.strip():
         return blank
-    return float(cell)
+    return float(cell.replace(",", ".") if comma else cell)
 
 
 def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | None, gaps: bool = False):
     """(data (n, k) for [time_col] + columns, time_col used); with ``gaps``, an empty value cell is NaN (the
     time column must be whole)."""
-    rows = _rows(path)
+    rows, comma = _rows(path)
     if not rows:
         raise ValueError(f"{path}: empty file; expected a header row and data")
     header = [h.strip() for h in rows[0]]
@@ -66,7 +85,7 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
     data = np.empty((len(rows) - 1, len(idx)))
     for r, row in enumerate(rows[1:], start=2):
         try:
-            data[r - 2] = [_number(row[i], b) for i, b in zip(idx, blank)]
+            data[r - 2] = [_number(row[i], b, comma) for i, b in zip(idx, blank)]
         except (ValueError, IndexError):
             raise ValueError(f"{path}: line {r} has a missing or non-numeric value in columns "
                              f"{', '.join(wanted)}") from None
