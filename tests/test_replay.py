@@ -278,8 +278,9 @@ def test_a_time_column_written_with_too_few_digits_reads_at_its_rate(tmp_path):
 
 
 def test_a_table_separated_by_semicolons_tabs_or_blanks_reads_as_its_comma_separated_twin(tmp_path):
-    # a European spreadsheet's export (semicolons, decimal commas), a LabVIEW text export (tabs) and an
-    # analyser's aligned columns had been refused as "no column 't'; columns are: t;base;tip1;tip2"
+    # a European spreadsheet's export (semicolons, decimal commas), a LabVIEW text export (tabs), an
+    # analyser's aligned columns and its export with settings and units around the header had been refused
+    # as "no column 't'; columns are: t;base;tip1;tip2" (or "line 2 has a missing or non-numeric value")
     n = 400
     t = np.arange(n) / 1000.0
     v = np.column_stack([np.sin(2 * np.pi * 30 * t), 1e-4 * np.cos(2 * np.pi * 30 * t), -2.5e3 * t])
@@ -290,6 +291,12 @@ def test_a_table_separated_by_semicolons_tabs_or_blanks_reads_as_its_comma_separ
     for name, (sep, dec) in forms.items():
         (tmp_path / name).write_text("\n".join(sep.join(c.replace(".", dec) for c in row)
                                               for row in [header] + cells) + "\n")
+    # an analyser's export: its settings before the header, a row of units after it
+    (tmp_path / "preamble.txt").write_text("Analyser export\nSample rate;1000;Hz\nChannels;3\n\n"
+                                           + "\n".join(";".join(c.replace(".", ",") for c in row)
+                                                       for row in [header, ["s", "m/s^2", "m/s^2", "m/s^2"]] + cells)
+                                           + "\n")
+    forms["preamble.txt"] = (";", ",")
     want = read_csv(tmp_path / "comma.csv", time_col="t")
     assert want.fs_hz == pytest.approx(1000.0)
     np.testing.assert_allclose(want.values, v, rtol=1e-5)

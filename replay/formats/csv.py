@@ -3,14 +3,16 @@
 Times come from a time column (``--time COL``; found by itself when a column is named ``t``, ``time``,
 ``time_s`` or ``t_s`` and neither ``--time`` nor ``--fs`` is given) or from a rate (``--fs HZ``). A time
 column must be uniform within 1 %, except for holes of whole steps (frames a recording lost), which are
-filled like a recording's. Cells are separated by commas, by semicolons (numbers then may carry a decimal
-comma), by tabs or by aligned blanks: what other labs' spreadsheets and analysers export. Every error names
-the file and the line or column.
+filled like a recording's. Cells are separated by tabs, by semicolons (numbers then may carry a decimal
+comma), by commas or by aligned blanks; the header is the first row that names the columns asked for, lines
+before it (an instrument's settings) are skipped, and so are rows of units after it: what other labs'
+spreadsheets and analysers export. Every error names the file and the line or column.
 """
 
 from __future__ import annotations
 
 import csv
+import itertools
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -22,37 +24,42 @@ from .base import Columns, Samples, check_rate, missing_refused, on_grid
 
 SUFFIXES = (".csv", ".txt")
 TIME_NAMES = ("t", "time", "time_s", "t_s")
-DELIMITERS = (",", ";", "\t")
+DELIMITERS = ("\t", ";", ",")
+PREAMBLE = 100  # lines searched for the header row
 MAX_BYTES = 4 << 30
 
 
-def _rows(path: Path) -> tuple[list[list[str]], bool]:
-    """The file's rows of cells, and whether its numbers are written with a decimal comma. The delimiter is
-    the one of ``DELIMITERS`` that splits the header row into the most columns (a comma on a tie), else
-    runs of blanks where they split it: a European spreadsheet's ``t;force;x`` with ``0,0015``, a
-    LabVIEW or analyser text export's tabs or aligned columns read as they are. A decimal comma is one
-    in a data cell where the delimiter is not a comma."""
+def _rows(path: Path) -> tuple[list[list[str]], str]:
+    """The file's rows of cells, and their delimiter: the first of ``DELIMITERS`` (tab, semicolon, comma)
+    that the median of the file's first ``PREAMBLE`` lines holds (data outnumber an instrument's preamble;
+    a tab or a semicolon first, since a file separated by them may write its numbers with decimal commas),
+    else runs of blanks where they split those lines. A European spreadsheet's ``t;force;x``, a LabVIEW or
+    analyser text export's tabs or aligned columns are read as they are."""
     try:
         if path.stat().st_size > MAX_BYTES:
             raise ValueError(f"{path}: larger than {MAX_BYTES >> 30} GiB")
         with open(path, newline="") as fh:
-            first = fh.readline()
+            head = list(itertools.islice(fh, PREAMBLE))
             fh.seek(0)
-            counts = {d: first.count(d) for d in DELIMITERS}
-            delimiter = max(DELIMITERS, key=lambda d: (counts[d], d == ","))
-            if counts[delimiter] == 0 and len(first.split()) > 1:
-                rows = [line.split() for line in fh if line.strip()]
-                delimiter = " "
-            else:
-                rows = list(csv.reader(fh, delimiter=delimiter))
+            found = [d for d in DELIMITERS if head and np.median([line.count(d) for line in head]) > 0]
+            if not found and head and np.median([len(line.split()) for line in head]) > 1:
+                return [line.split() for line in fh if line.strip()], " "
+            delimiter = found[0] if found else ","
+            return list(csv.reader(fh, delimiter=delimiter)), delimiter
     except FileNotFoundError:
         raise ValueError(f"{path}: no such file") from None
     except IsADirectoryError:
         raise ValueError(f"{path}: is a folder; give a CSV file") from None
     except (UnicodeDecodeError, csv.Error) as exc:
         raise ValueError(f"{path}: not a text CSV file ({str(exc)[:60]})") from None
-    comma = delimiter != "," and any("," in cell for row in rows[1:3] for cell in row)
-    return rows, comma
+
+
+def _numeric(cell: str) -> bool:
+    try:
+        float(cell.replace(",", "."))
+    except ValueError:
+        return False
+    return True
 
 
 def _number(cell: str, blank: float | None, comma: bool = False) -> float:
@@ -64,12 +71,20 @@ def _number(cell: str, blank: float | None, comma: bool = False) -> float:
 
 
 def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | None, gaps: bool = False):
-    """(data (n, k) for [time_col] + columns, time_col used); with ``gaps``, an empty value cell is NaN (the
-    time column must be whole)."""
-    rows, comma = _rows(path)
+    """(data (n, k) for [time_col] + columns, time_col used, the file's rows before the data); with ``gaps``,
+    an empty value cell is NaN (the time column must be whole)."""
+    rows, delimiter = _rows(path)
     if not rows:
         raise ValueError(f"{path}: empty file; expected a header row and data")
-    header = [h.strip() for h in rows[0]]
+    # the header is the first row that names every column asked for: lines before it are an instrument's
+    # preamble (its settings, a title), and rows after it that hold no number its units
+    at = next((r for r, row in enumerate(rows[:PREAMBLE]) if set(columns) <= {h.strip() for h in row}), 0)
+    header = [h.strip() for h in rows[at]]
+    units = 0
+    while at + 1 + units < len(rows) and units < 3 and not any(_numeric(c) for c in rows[at + 1 + units]):
+        units += 1
+    first = at + 1 + units  # line ``first + 1`` of the file is the first of data
+    comma = delimiter != "," and any("," in cell for row in rows[first:first + 2] for cell in row)  # 0,0015
     if time_col is None and fs_hz is None:
         time_col = next((c for c in TIME_NAMES if c in header), None)
         if time_col is None:
@@ -82,27 +97,29 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
         raise ValueError(f"{path}: no column {missing[0]!r}; columns are: {', '.join(header)}")
     idx = [header.index(c) for c in wanted]
     blank = [None if time_col and j == 0 else (np.nan if gaps else None) for j in range(len(idx))]
-    data = np.empty((len(rows) - 1, len(idx)))
-    for r, row in enumerate(rows[1:], start=2):
+    data = np.empty((len(rows) - first, len(idx)))
+    for r, row in enumerate(rows[first:], start=first + 1):
         try:
-            data[r - 2] = [_number(row[i], b, comma) for i, b in zip(idx, blank)]
+            data[r - first - 1] = [_number(row[i], b, comma) for i, b in zip(idx, blank)]
         except (ValueError, IndexError):
             raise ValueError(f"{path}: line {r} has a missing or non-numeric value in columns "
                              f"{', '.join(wanted)}") from None
     if len(data) < 2:
         raise ValueError(f"{path}: needs at least two data rows")
-    where = lambda i: f"line {i + 2}"  # noqa: E731
+    where = lambda i: f"line {i + first + 1}"  # noqa: E731
     if time_col:
         missing_refused(path, data[:, :1], False, where, "; repair or remove it")
     missing_refused(path, data, gaps, where, "; repair or remove it")
-    return data, time_col
+    return data, time_col, first
 
 
-def _grid(path: Path, t: np.ndarray, time_col: str) -> tuple[np.ndarray, float]:
-    """Grid positions of the rows and the rate, from a time column: uniform, or with holes of whole steps."""
+def _grid(path: Path, t: np.ndarray, time_col: str, first: int = 1) -> tuple[np.ndarray, float]:
+    """Grid positions of the rows and the rate, from a time column: uniform, or with holes of whole steps
+    (``first``: the rows of the file before the data)."""
     dt = np.diff(t)
     if np.any(dt <= 0):
-        raise ValueError(f"{path}: column {time_col!r} is not strictly increasing (line {int(np.argmax(dt <= 0)) + 3})")
+        raise ValueError(f"{path}: column {time_col!r} is not strictly increasing "
+                         f"(line {int(np.argmax(dt <= 0)) + first + 2})")
     med = float(np.median(dt))
     k = dt / med
     if np.max(np.abs(k - np.rint(k))) > 0.01:
@@ -137,10 +154,10 @@ def read_columns(path: str | Path, names: list[str], time_col: str | None = None
     path = Path(path)
     if fs_hz is not None:
         check_rate(fs_hz)
-    data, time_col = _table(path, list(names), time_col, fs_hz, gaps)
+    data, time_col, first = _table(path, list(names), time_col, fs_hz, gaps)
     if time_col is None:
         return Columns({c: data[:, j] for j, c in enumerate(names)}, float(fs_hz), str(path))
-    index, fs = _grid(path, data[:, 0], time_col)
+    index, fs = _grid(path, data[:, 0], time_col, first)
     if gaps and index[-1] != len(index) - 1:
         full = np.full((int(index[-1]) + 1, len(names)), np.nan)
         full[index] = data[:, 1:]
@@ -158,10 +175,10 @@ def read_samples(path: str | Path, *, time_col: str | None = None, fs_hz: float 
     path = Path(path)
     if fs_hz is not None:
         check_rate(fs_hz)
-    data, time_col = _table(path, [base, tip1, tip2], time_col, fs_hz)
+    data, time_col, first = _table(path, [base, tip1, tip2], time_col, fs_hz)
     if time_col is None:
         return Samples(np.arange(len(data)) / fs_hz, data, float(fs_hz), np.arange(len(data)), str(path))
-    index, fs = _grid(path, data[:, 0], time_col)
+    index, fs = _grid(path, data[:, 0], time_col, first)
     return on_grid(index, data[:, 1:], index, fs, str(path), fill)
 
 
