@@ -30,7 +30,7 @@ from ident.discovery.model import (Element, LinearModel, mode_states, nudging_ga
 from ident.discovery.search import (Candidate, Settings, choose, clustered_p, one_sign, paired_p, pieces_per_block,
                                     predict, signed_rank_p, significant)
 from ident.discovery.signals import (_first_motion, coherent_share, convert, first_family, force_window, frf, miso_frf,
-                                    dropouts, preliminary_band, prepare, undriven, within_budget)
+                                    bridged, dropouts, preliminary_band, prepare, undriven, within_budget)
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
 
@@ -931,9 +931,9 @@ def test_a_dead_sensor_is_left_out_and_named_and_the_rest_is_analysed():
     # dead says so and is analysed as it is
     assert undriven(replace(m, responses=m.responses[:1] + m.responses[2:]), band) == []
     only = replace(m, responses=(m.responses[1],))
-    kept, _, notes = _undriven_left_out(only, None, keep=False)
+    kept, _, notes = _undriven_left_out(only, None, band, keep=False)
     assert kept is only and notes[0].startswith("no response is driven by the input")
-    kept, _, notes = _undriven_left_out(m, None, keep=True)
+    kept, _, notes = _undriven_left_out(m, None, band, keep=True)
     assert kept is m and "stays in the analysis" in notes[0]
 
 
@@ -958,18 +958,57 @@ def test_a_dropout_is_left_out_and_named_and_a_quantised_sine_is_no_dropout():
     left = [d.split.blocks[k] for k in d.split.excluded]
     assert all(any(b.start < r < b.stop for b in left) for r in (12000, 13999))  # every stalled sample's block
     assert not d.findings and d.baseline_test_nrmse < 1.5 * clean.baseline_test_nrmse
-    # a sine quantised to 10 codes of amplitude, no noise, holds its peak's code for 14 % of a period: far
-    # less than half a period of a band that starts at 0.4 x its frequency (84 samples here)
-    sine = np.round(10 * np.sin(2 * np.pi * 15.0 * t))
-    quiet = Measurement(fs, Channel("force", "force", f), (Channel("x", "acceleration", sine),))
-    assert dropouts(quiet, (6.0, 100.0)) == []
+    # a 4 Hz sine quantised to 10 codes of amplitude, no noise, holds its peak's code for 14 % of a period
+    # (35 samples, over the 16-sample floor): far less than half a period of a band that starts at 0.4 x its
+    # frequency (313 samples)
+    band = (1.6, 100.0)
+    sine = np.round(10 * np.sin(2 * np.pi * 4.0 * t))
     run = np.diff(np.flatnonzero(np.diff(sine) != 0)).max()
-    assert 0.1 * fs / 15.0 < run < 0.2 * fs / 15.0
-    # nor a quiet start too small for the converter: the sine rising over 5 s reads 0 for its first 0.25 s
-    # (three periods of the band's low edge) while the input moves, then a code or two
-    rising = np.round(10 * np.minimum(t / 5.0, 1.0) * np.sin(2 * np.pi * 15.0 * t))
-    assert np.flatnonzero(rising)[0] > 0.2 * fs
-    assert dropouts(replace(quiet, responses=(Channel("x", "acceleration", rising),)), (6.0, 100.0)) == []
+    assert 16 < 0.1 * fs / 4.0 < run < 0.2 * fs / 4.0 < 0.5 * fs / band[0]
+    quiet = Measurement(fs, Channel("force", "force", f), (Channel("x", "acceleration", sine),))
+    assert dropouts(quiet, band) == []
+    # nor a quiet start too small for the converter: the sine rising over 20 s reads 0 for its first second
+    # (three times that half period) while the input moves, then a code or two
+    rising = np.round(10 * np.minimum(t / 20.0, 1.0) * np.sin(2 * np.pi * 4.0 * t))
+    assert np.flatnonzero(rising)[0] > 3 * 0.5 * fs / band[0]
+    assert dropouts(replace(quiet, responses=(Channel("x", "acceleration", rising),)), band) == []
+    # the same run in a response that moves by many codes around it is one
+    held = sine * 30
+    held[10000:11000] = held[9999]
+    (g,) = dropouts(replace(quiet, responses=(Channel("x", "acceleration", held),)), band)
+    assert g.start_s == 9.999 and 11.0 <= g.stop_s < 11.005  # (it holds 0, which the sine reads there too)
+
+
+def test_a_dropout_in_the_only_training_slice_stays_and_short_missing_runs_are_bridged():
+    # --train makes one training block: a dropout there cannot be left out (it had left no training data, and
+    # the fit failed on an empty array); it stays and the note says to cut the record. Single lost samples,
+    # 1 % of the record on every channel (a recording that lost frames one by one), are bridged and analysed:
+    # each had cost its blocks, and together every block
+    fs = 1000.0
+    t = np.arange(0, 30, 1 / fs)
+    w = 2 * np.pi * 15.0
+    rng = np.random.default_rng(2)
+    f = lfilter(*butter(4, 60 / (fs / 2)), rng.standard_normal(t.size))
+    _, x, _ = lsim(([1.0], [1.0, 2 * 0.02 * w, w * w]), f, t)
+    x = x + 0.01 * x.std() * rng.standard_normal(x.size)
+    stalled = x.copy()
+    stalled[5000:6000] = x[4999]
+    m = Measurement(fs, Channel("force", "force", f), (Channel("x", "displacement", stalled),))
+    d = discover(m, train=slice(0, 12000), test=slice(12000, 30000))
+    (note,) = [n for n in d.notes if "a dropout" in n]
+    assert "x reads" in note and "the last training or held-out data: cut the record" in note
+    assert not d.split.excluded
+    lost = rng.choice(np.arange(100, t.size - 100), 300, replace=False)
+    fg, xg = f.copy(), x.copy()
+    fg[lost] = np.nan
+    xg[lost] = np.nan
+    g = bridged(fs, Channel("force", "force", fg), (Channel("x", "displacement", xg),))
+    runs = int(np.count_nonzero(np.diff(np.isnan(xg).astype(int)) == 1))  # (neighbours make one run)
+    assert len(g.lost) == 2 * runs > 500 and np.isfinite(g.responses[0].values).all()
+    d = discover(g)
+    (note,) = [n for n in d.notes if "short runs of missing samples" in n]
+    assert note.startswith(f"{2 * runs} short runs") and not any("a dropout" in n for n in d.notes)
+    assert not d.split.excluded and not d.findings and d.baseline_test_nrmse < 0.05
 
 
 def test_multiple_input_frf_conditions_out_a_correlated_second_input():

@@ -305,6 +305,24 @@ def test_a_table_separated_by_semicolons_tabs_or_blanks_reads_as_its_comma_separ
         assert got.fs_hz == want.fs_hz and np.array_equal(got.values, want.values), name
 
 
+def test_a_comma_table_keeps_its_commas_and_a_preamble_naming_the_channels_is_no_header(tmp_path):
+    # a comma-separated file with semicolons in a text column is read as before; a semicolon file whose
+    # first rows are integers still reads its decimal commas; a preamble line that names the channels is
+    # not the header (the header is the last such line before the numbers)
+    notes = tmp_path / "notes.csv"
+    notes.write_text("t,base,tip1,tip2,comment\n0.000,1,2,3,ok; fine\n0.001,1.5,2,3,ok\n0.002,2,2,3,x\n")
+    got = read_csv(notes, time_col="t")
+    np.testing.assert_array_equal(got.values[:, 0], [1.0, 1.5, 2.0])
+    late = tmp_path / "late.csv"
+    late.write_text("t;base;tip1;tip2\n0;0;0;0\n1;0;0;0\n2;0,52;1,5;2,5\n")
+    np.testing.assert_array_equal(read_csv(late, time_col="t").values[2], [0.52, 1.5, 2.5])
+    named = tmp_path / "named.csv"
+    named.write_text("Channels,base,tip1,tip2\nt,base,tip1,tip2\ns,m/s^2,m/s^2,m/s^2\n0,1,2,3\n0.5,4,5,6\n")
+    got = read_csv(named, time_col="t")
+    assert got.fs_hz == 2.0
+    np.testing.assert_array_equal(got.values, [[1, 2, 3], [4, 5, 6]])
+
+
 @pytest.mark.parametrize("content,args,match", [
     ("a,b,c\n1,2,3\n", ["--fs", "100"], "no column 'base'"),
     ("base,tip1,tip2\n1,2,3\n1,nan,3\n1,2,3\n", ["--fs", "100"], "line 3 holds NaN"),

@@ -35,7 +35,7 @@ from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline
                      offset_findings, paired_p, pieces_per_block, predict, refine, regress, regressions, same_sensors,
                      score, significant, simulation_bound, spring_damper_responses, train_error)
 from .signals import (ORDER, UNDRIVEN_SHARE, Channel, Dropout, Measurement, Prepared, below_band, convert, dropouts,
-                      first_family, modal_band, preliminary_band, prepare, undriven, within_budget)
+                      first_family, modal_band, preliminary_band, prepare, span_text, undriven, within_budget)
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
 
@@ -259,23 +259,24 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
     thread, nothing with two); with one, ``ident discover``, the tests and the benchmark's Dask tasks
     agree."""
     with threadpool_limits(limits=1, user_api="blas"):
-        m, fit_data, input_notes = _undriven_left_out(m, fit_data, keep=rig is not None)
+        band0 = preliminary_band(m)
+        m, fit_data, input_notes = _undriven_left_out(m, fit_data, band0, keep=rig is not None)
         ranges = clipped_ranges(ch.values for ch in m.responses)  # as recorded, before any decimation
-        gaps = list(m.lost) + dropouts(m, preliminary_band(m))  # as recorded: decimated, a run is no longer one value
+        # (found as recorded: decimated, a run is no longer one value)
+        gaps = _gaps(m, band0, input_notes)
+        fit_gaps = [] if fit_data is None else _gaps(fit_data, preliminary_band(fit_data), input_notes, "fit data: ")
         input_notes += _input_clipped(m.excitation)
-        if fit_data is not None and fit_data.lost:
-            input_notes.append("fit data: " + "; ".join(str(g) for g in fit_data.lost) + ", and fitted so")
         m, fit_data, train, test, notes = _within_budget(m, fit_data, train, test, settings.max_samples)
         try:
             return _discover(m, rig, fit_data, train, test, settings, progress or (lambda line: None), notes,
-                             ranges, input_notes, gaps)
+                             ranges, input_notes, gaps, fit_gaps)
         except ValueError as exc:
             if not notes or type(exc) is not ValueError or not str(exc):
                 raise
             raise ValueError(f"{exc} (after {'; '.join(notes)})") from exc
 
 
-def _undriven_left_out(m: Measurement, fit_data: Measurement | None, keep: bool
+def _undriven_left_out(m: Measurement, fit_data: Measurement | None, band: tuple[float, float], keep: bool
                        ) -> tuple[Measurement, Measurement | None, list[str]]:
     """The record (and ``fit_data``) without the responses that carry nothing the input drives
     (``signals.undriven``: a dead, unplugged or disconnected sensor), and the note that says so. Left in,
@@ -284,7 +285,7 @@ def _undriven_left_out(m: Measurement, fit_data: Measurement | None, keep: bool
     a confident false finding at tip 1 (quadratic stiffness, gain 0.90). Where every response is so, or the
     baseline is the rig model (``keep``: it needs both tips), the responses stay and the note says what the
     record holds."""
-    dead = undriven(m, preliminary_band(m))
+    dead = undriven(m, band)
     if not dead:
         return m, fit_data, []
     named = ", ".join(f"{m.responses[i].name} {100 * s:.0f} %" for i, s in dead)
@@ -298,34 +299,80 @@ def _undriven_left_out(m: Measurement, fit_data: Measurement | None, keep: bool
         return m, fit_data, [f"{why}: a dead, unplugged or disconnected sensor? The rig model needs both "
                              "tips, so it stays in the analysis"]
     gone = {m.responses[i].name for i, _ in dead}
-    m = replace(m, responses=tuple(ch for ch in m.responses if ch.name not in gone))
+
+    def without(x: Measurement) -> Measurement:
+        return replace(x, responses=tuple(ch for ch in x.responses if ch.name not in gone),
+                       lost=tuple(g for g in x.lost if g.name not in gone))
+
+    m = without(m)
     if fit_data is not None and any(ch.name not in gone for ch in fit_data.responses):
-        fit_data = replace(fit_data, responses=tuple(ch for ch in fit_data.responses if ch.name not in gone))
+        fit_data = without(fit_data)
     return m, fit_data, [f"left out {', '.join(sorted(gone))}: {why}; a dead, unplugged or disconnected sensor?"]
 
 
-def _dropout_spans(prep: Prepared, gaps: list[Dropout], after: int) -> list[tuple[int, int]]:
-    """The samples each dropout spoils: its run widened by the band-pass's edge, and by ``after`` more after it."""
-    fs = prep.fs_hz
-    return [(int((g.start_s - prep.start_s) * fs) - prep.edge,
-             int(np.ceil((g.stop_s - prep.start_s) * fs)) + prep.edge + after) for g in gaps]
+SHORT_GAP = 0.1  # of a period of the band's top: a missing run shorter than this is bridged, not left out
 
 
-def _without_dropouts(split: Split, prep: Prepared, gaps: list[Dropout], warm: int) -> tuple[Split, list[str]]:
+def _gaps(m: Measurement, band: tuple[float, float], notes: list[str], what: str = "") -> list[Dropout]:
+    """The record's dropouts (``signals.dropouts``) and its runs of missing samples (``Measurement.lost``)
+    long enough to leave out; a note on the shorter ones, which stay bridged: over a tenth of a period of
+    the band's top, linear interpolation errs by at most (pi / 10)^2 / 2 = 5 % of a sinusoid's amplitude,
+    for a few samples. A recording that lost 1 % of its frames one by one (the simulated rig's fault) had
+    every block reached, and was told to cut the record."""
+    short = SHORT_GAP / band[1]
+    brief = [g for g in m.lost if g.stop_s - g.start_s < short]
+    if brief:
+        longest = max(g.stop_s - g.start_s for g in brief)
+        notes.append(f"{what}{len(brief)} short run{'s' if len(brief) > 1 else ''} of missing samples bridged by "
+                     f"interpolation (the longest {1e3 * longest:.3g} ms, under a tenth of a period of the band's "
+                     f"top, {band[1]:.3g} Hz) and analysed")
+    return [g for g in m.lost if g.stop_s - g.start_s >= short] + dropouts(m, band)
+
+
+def _said(gaps: list[Dropout], most: int = 4) -> str:
+    """The dropouts in words: a run missing from several channels at once (a lost frame) named once, and
+    beyond ``most`` runs their count and the first of them."""
+    lost: dict[tuple[float, float], list[str]] = {}
+    words = []
+    for g in gaps:
+        if np.isnan(g.value):
+            lost.setdefault((g.start_s, g.stop_s), []).append(g.name)
+        else:
+            words.append(str(g))
+    for (a, b), names in lost.items():
+        words.append(f"{', '.join(names)} hold{'' if len(names) > 1 else 's'} no number {span_text(a, b)} (bridged "
+                     "by interpolation)")
+    if len(words) > most:
+        return f"{len(words)} runs, the first: " + "; ".join(words[:2])
+    return "; ".join(words)
+
+
+def _without_dropouts(split: Split, prep: Prepared, gaps: list[Dropout]) -> tuple[Split, list[str], list[tuple]]:
     """The split without the blocks a dropout reaches (``signals.dropouts``: a response that reads one
-    value while the excitation moves; ``Measurement.lost``: one that held no number), and the note that says so. A dropout reaches the blocks within the
-    band-pass's edge of it, and those whose simulation starts from a warm-up (``warm`` samples) that reads
-    it. Left in, the baseline fits the step it makes and every cause is fitted to it: independent seeds 8
-    and 15 ("none") with a response read as 0 for 2 s got a contact (gain 0.061) and a joint (0.054). Where
-    the dropouts reach more than a third of the blocks, they stay and the note says to cut the record."""
-    if not gaps:
-        return split, []
-    hit = blocks_reached(split, _dropout_spans(prep, gaps, warm))
-    said = "; ".join(str(g) for g in gaps)
-    if len(hit) > len(split.blocks) // 3:
-        return split, [f"{said}: {WHAT_DROPS} that reaches {len(hit)} of {len(split.blocks)} blocks, too many to "
-                       "leave out: cut the record around it (--train, --test)"]
-    return split.without(hit), [f"left out blocks {hit}: {said}: {WHAT_DROPS}"]
+    value while the excitation moves; ``Measurement.lost``: a run that held no number), the note that says
+    so, and the samples it spoils (their residual is no blow's). A dropout reaches the blocks within the
+    band-pass's edge of it, and those whose simulation starts from a warm-up that can read it (``_warm``'s
+    longest: three periods of the band's low edge). Left in, the baseline fits the step it makes and every
+    cause is fitted to it: independent seeds 8 and 15 ("none") with a response read as 0 for 2 s got a
+    contact (gain 0.061) and a joint (0.054). The dropouts stay, and the note says to cut the record, where
+    they reach more than a third of the blocks or the last training or held-out block (a ``--train``
+    slice is one block)."""
+    fs = prep.fs_hz
+    after = max(prep.edge, int(3.0 * fs / float(prep.band[0])))
+    spans = [(int((g.start_s - prep.start_s) * fs) - prep.edge,
+              int(np.ceil((g.stop_s - prep.start_s) * fs)) + prep.edge + after) for g in gaps]
+    inside = [(g, sp) for g, sp in zip(gaps, spans) if sp[1] > 0 and sp[0] < prep.n]
+    hit = blocks_reached(split, [sp for _, sp in inside])
+    if not hit:
+        return split, [], []
+    said = _said([g for g, _ in inside])
+    kept = split.without(hit)
+    if len(hit) > len(split.blocks) // 3 or not kept.train or not kept.test:
+        why = ("too many to leave out" if len(hit) > len(split.blocks) // 3
+               else "and with them the last training or held-out data")
+        return split, [f"{said}: {WHAT_DROPS} that reaches {len(hit)} of {len(split.blocks)} blocks, {why}: cut "
+                       "the record around it (--train, --test)"], []
+    return kept, [f"left out blocks {hit}: {said}: {WHAT_DROPS}"], [sp for _, sp in inside]
 
 
 def _input_clipped(excitation: Channel, share: float = 0.002, run: int = 3) -> list[str]:
@@ -400,7 +447,7 @@ def noise_floor(d: Discovery, m: Measurement, reference: Measurement, settings: 
         raise ValueError("the reference must be the record's responses, sample for sample, in the same kinds")
     diff = Measurement(m.fs_hz, m.excitation, tuple(
         Channel(c.name, c.kind, np.asarray(c.values, float) - np.asarray(r.values, float))
-        for c, r in zip(m.responses, reference.responses)), m.start_s)
+        for c, r in zip(m.responses, reference.responses) if c.name in d.prep.names), m.start_s)  # (none left out)
     ex = within_budget(m, settings.max_samples)
     if ex.step > 1:  # decimated alike (by the step alone: the span is cut below, as the record's was)
         diff = within_budget(diff, np.iinfo(np.int64).max, step=ex.step).measurement
@@ -416,7 +463,8 @@ def noise_floor(d: Discovery, m: Measurement, reference: Measurement, settings: 
 def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | None, train: slice | None,
               test: slice | None, settings: Settings, say: Callable[[str], None],
               budget_notes: list[str], clip_ranges: list[float | None],
-              input_notes: list[str] | None = None, gaps: list[Dropout] = ()) -> Discovery:
+              input_notes: list[str] | None = None, gaps: tuple[Dropout, ...] | list[Dropout] = (),
+              fit_gaps: tuple[Dropout, ...] | list[Dropout] = ()) -> Discovery:
     notes: list[str] = list(budget_notes) + list(input_notes or [])
     for line in notes:
         say(line)
@@ -437,23 +485,27 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
             f"{band[1]:.3g} Hz; fitting there again")
     f_min = float(prep.band[0]) / 0.4
     split = _split(prep, train, test)
-    # a dropout's blocks out of the baseline's fit, and below out of the warm-ups that read it. The first fit,
-    # which chose the band and the order, saw the record whole: a dropout left out there too had the order
-    # chosen on other held-back blocks, and lost independent seed 8's second mode (held out at 0.25, not 0.04)
-    split, _ = _without_dropouts(split, prep, gaps, 0)
+    # a dropout's blocks out of the baseline's fit, the scoring and the causes' training. The first fit, which
+    # chose the band and the order, saw the record whole: a dropout left out there too had the order chosen
+    # on other held-back blocks, and lost independent seed 8's second mode (held out at 0.25, not 0.04)
+    split, said, spoilt = _without_dropouts(split, prep, gaps)
+    fit_segments = fit_split = None
+    if rig is None and fit_data is not None:
+        prep_fit = prepare(fit_data, band)
+        fit_split, fit_said, _ = _without_dropouts(_split(prep_fit), prep_fit, fit_gaps)
+        said += [f"fit data: {line}" for line in fit_said]
+        fit_segments = ((slice(prep_fit.edge, prep_fit.n - prep_fit.edge),) if not fit_split.excluded else
+                        tuple(b for k, b in enumerate(fit_split.blocks) if k not in fit_split.excluded))
+    for line in said:
+        notes.append(line)
+        say(line)
     if rig is None:
         if fit_data is not None:
-            prep_fit = prepare(fit_data, band)
-            baseline = ModalBaseline.fit(prep_fit, np.arange(prep_fit.edge, prep_fit.n - prep_fit.edge),
-                                         poles0=poles0)
+            baseline = ModalBaseline.fit(prep_fit, rows_of(fit_segments), poles0=poles0)
         else:
             baseline = _fit_in_band(prep, split, poles0)
     warm = _warm(baseline, prep)
     bound = simulation_bound(prep)
-    split, said = _without_dropouts(split, prep, gaps, warm)
-    for line in said:
-        notes.append(line)
-        say(line)
 
     # unmodelled transients: isolated bursts of the baseline's error. Each block is predicted from the
     # state read off the data before it, so a blow's burst ends with the block it strikes in; predicted
@@ -461,7 +513,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     resid_all = np.full((prep.n, len(prep.names)), np.nan)
     for seg in split.blocks:
         resid_all[seg] = prep.measured[seg] - predict(baseline, baseline.model, prep, seg, warm, past=prep.edge)
-    for a, b in _dropout_spans(prep, gaps, warm):  # a dropout's step is no blow, nor a block started from it
+    for a, b in spoilt:  # a dropout's step is no blow, nor the start of a block simulated from it
         resid_all[max(a, 0):max(b, 0)] = 0.0
     period = max(4, int(prep.fs_hz / f_min))
     rows = rows_of(split.blocks)
@@ -561,8 +613,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     by_loc = {loc.name: loc for loc in locations}
     fit_record = None
     if fit_data is not None:
-        fit_record = FitLevel(prep_fit, (slice(prep_fit.edge, prep_fit.n - prep_fit.edge),), _split(prep_fit),
-                              _warm(baseline, prep_fit))
+        fit_record = FitLevel(prep_fit, fit_segments, fit_split, _warm(baseline, prep_fit))
     refined = []
     leaders = _leaders(cands, baseline, by_loc, prep, split, warm, scale, bound, settings,
                        next_place=fit_record is not None)

@@ -65,8 +65,8 @@ class Measurement:
     excitation: Channel
     responses: tuple[Channel, ...]
     start_s: float = 0.0  # where the first sample lies in the record it was taken from (an excerpt's offset)
-    # runs where a response held no number, bridged by interpolation (``bridged``): dropouts to discovery
-    lost: tuple = ()
+    # runs where a channel held no number, bridged by interpolation (``bridged``): dropouts to discovery
+    lost: tuple["Dropout", ...] = ()
 
     def __post_init__(self):
         if not (np.isfinite(self.fs_hz) and self.fs_hz > 0):
@@ -96,8 +96,8 @@ class Measurement:
             if np.ptp(x) == 0:
                 if ch is self.excitation:
                     raise ValueError(f"the excitation {ch.name!r} is constant: nothing drove the structure")
-                raise ValueError(f"response {ch.name!r} is constant (a dead or unplugged sensor?): leave it out, "
-                                 "name the responses to analyse with --response")
+                raise ValueError(f"response {ch.name!r} is constant (a dead or unplugged sensor?): leave it out "
+                                 "(ident discover: name the responses to analyse with --response)")
         if n < 256:
             raise ValueError(f"{n} samples are too few for discovery; give at least 256")
 
@@ -324,10 +324,16 @@ class Dropout:
     value: float
 
     def __str__(self) -> str:
-        span = f"from {self.start_s:.2f} s to {self.stop_s:.2f} s"
         if np.isnan(self.value):
-            return f"{self.name} holds no number {span} (bridged by interpolation)"
-        return f"{self.name} reads {self.value:.4g} {span} while the excitation moves"
+            return f"{self.name} holds no number {span_text(self.start_s, self.stop_s)} (bridged by interpolation)"
+        return f"{self.name} reads {self.value:.4g} {span_text(self.start_s, self.stop_s)} while the excitation moves"
+
+
+def span_text(start_s: float, stop_s: float) -> str:
+    """A stretch of a record in words: from and to in seconds, or a short one's length in milliseconds."""
+    if stop_s - start_s >= 0.1:
+        return f"from {start_s:.2f} s to {stop_s:.2f} s"
+    return f"for {1e3 * (stop_s - start_s):.3g} ms at {start_s:.3f} s"
 
 
 def bridged(fs_hz: float, excitation: Channel, responses: tuple[Channel, ...], start_s: float = 0.0) -> Measurement:
@@ -342,8 +348,8 @@ def bridged(fs_hz: float, excitation: Channel, responses: tuple[Channel, ...], s
         if bad.all() and y.size:
             if ch is excitation:
                 raise ValueError(f"the excitation {ch.name!r} holds no number")
-            raise ValueError(f"response {ch.name!r} holds no number: leave it out, name the responses to analyse "
-                             "with --response")
+            raise ValueError(f"response {ch.name!r} holds no number: leave it out (ident discover: name the "
+                             "responses to analyse with --response)")
         if bad.any():
             at = np.arange(y.size)
             y[bad] = np.interp(at[bad], at[~bad], y[~bad])
@@ -355,11 +361,14 @@ def bridged(fs_hz: float, excitation: Channel, responses: tuple[Channel, ...], s
 
 
 def dropouts(m: Measurement, band: tuple[float, float]) -> list[Dropout]:
-    """The runs where a response reads one value for a period of the band's low edge or longer (16 samples
-    at least) while the excitation does not. A measured signal carries noise, so it never repeats a value
-    for long; a quantised one stays on its peak's code for a share of a period (a sine 100 codes high: 4.5 %
-    of it), nowhere near a period of the band's low edge, 2.5 periods of the slowest mode. A hammer record
-    is not judged: between its decays a quiet sensor may read its rest code for seconds."""
+    """The runs where a response reads one value for half a period of the (preliminary) band's low edge or
+    longer, 16 samples at least, while the excitation moves. The low edge is at most half the lowest
+    frequency the input drives, so the run lasts a period of it or more. A measured signal carries noise
+    and never repeats a value for long; a quantised one holds its peak's code for a share of a period (a
+    sine 10 codes high: 14 %), and a motion too small for the converter reads one code while the input
+    moves: around a dropout the response moves by more than three codes (its standard deviation over the
+    run's length on each side). A hammer record is not judged: between its decays a quiet sensor may read
+    its rest code for seconds."""
     u = np.asarray(m.excitation.values, float)
     if impulsive(u):
         return []

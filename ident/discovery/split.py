@@ -36,7 +36,7 @@ def rows_of(segs) -> np.ndarray:
 class Split:
     blocks: tuple[slice, ...]
     held_out: tuple[int, ...]
-    excluded: tuple[int, ...] = ()  # blocks an unmodelled transient reaches
+    excluded: tuple[int, ...] = ()  # blocks an unmodelled transient or a dropout reaches
 
     @property
     def train(self) -> tuple[slice, ...]:

@@ -3,16 +3,15 @@
 Times come from a time column (``--time COL``; found by itself when a column is named ``t``, ``time``,
 ``time_s`` or ``t_s`` and neither ``--time`` nor ``--fs`` is given) or from a rate (``--fs HZ``). A time
 column must be uniform within 1 %, except for holes of whole steps (frames a recording lost), which are
-filled like a recording's. Cells are separated by tabs, by semicolons (numbers then may carry a decimal
-comma), by commas or by aligned blanks; the header is the first row that names the columns asked for, lines
-before it (an instrument's settings) are skipped, and so are rows of units after it: what other labs'
-spreadsheets and analysers export. Every error names the file and the line or column.
+filled like a recording's. Cells are separated by commas, tabs, semicolons or aligned blanks (numbers
+then may carry a decimal comma); the header is the last row before the numbers that names the columns asked
+for, lines before it (an instrument's settings) are skipped, and so are rows of units after it: what other
+labs' spreadsheets and analysers export. Every error names the file and the line or column.
 """
 
 from __future__ import annotations
 
 import csv
-import itertools
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -24,37 +23,37 @@ from .base import Columns, Samples, check_rate, missing_refused, on_grid
 
 SUFFIXES = (".csv", ".txt")
 TIME_NAMES = ("t", "time", "time_s", "t_s")
-DELIMITERS = ("\t", ";", ",")
+DELIMITERS = (",", "\t", ";", " ")  # " ": runs of blanks
 PREAMBLE = 100  # lines searched for the header row
 MAX_BYTES = 4 << 30
 
 
-def _rows(path: Path) -> tuple[list[list[str]], str]:
-    """The file's rows of cells, and their delimiter: the first of ``DELIMITERS`` (tab, semicolon, comma)
-    that the median of the file's first ``PREAMBLE`` lines holds (data outnumber an instrument's preamble;
-    a tab or a semicolon first, since a file separated by them may write its numbers with decimal commas),
-    else runs of blanks where they split those lines. A European spreadsheet's ``t;force;x``, a LabVIEW or
-    analyser text export's tabs or aligned columns are read as they are."""
+def _lines(path: Path) -> list[str]:
     try:
         if path.stat().st_size > MAX_BYTES:
             raise ValueError(f"{path}: larger than {MAX_BYTES >> 30} GiB")
         with open(path, newline="") as fh:
-            head = list(itertools.islice(fh, PREAMBLE))
-            fh.seek(0)
-            found = [d for d in DELIMITERS if head and np.median([line.count(d) for line in head]) > 0]
-            if not found and head and np.median([len(line.split()) for line in head]) > 1:
-                return [line.split() for line in fh if line.strip()], " "
-            delimiter = found[0] if found else ","
-            return list(csv.reader(fh, delimiter=delimiter)), delimiter
+            return fh.readlines()
     except FileNotFoundError:
         raise ValueError(f"{path}: no such file") from None
     except IsADirectoryError:
         raise ValueError(f"{path}: is a folder; give a CSV file") from None
-    except (UnicodeDecodeError, csv.Error) as exc:
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not a text CSV file ({str(exc)[:60]})") from None
+
+
+def _cells(path: Path, lines: list[str], delimiter: str) -> list[list[str]]:
+    """The lines' cells (" ": runs of blanks; a blank line is a row of no cells either way)."""
+    if delimiter == " ":
+        return [line.split() for line in lines]
+    try:
+        return list(csv.reader(lines, delimiter=delimiter))
+    except csv.Error as exc:
         raise ValueError(f"{path}: not a text CSV file ({str(exc)[:60]})") from None
 
 
 def _numeric(cell: str) -> bool:
+    """Is the cell a number (with a decimal point or a decimal comma)?"""
     try:
         float(cell.replace(",", "."))
     except ValueError:
@@ -70,21 +69,41 @@ def _number(cell: str, blank: float | None, comma: bool = False) -> float:
     return float(cell.replace(",", ".") if comma else cell)
 
 
+def _layout(rows: list[list[str]], names: set[str]) -> tuple[int, int] | None:
+    """(the header's row, the first data row) where a row among the first ``PREAMBLE`` names every column
+    asked for, else None. The header is the last such row before the first row of numbers: lines before
+    it are an instrument's preamble (its settings, a title, which may name the channels too); rows after it
+    that hold no number and no empty cell are its units."""
+    head = rows[:PREAMBLE]
+    numbers = next((r for r, row in enumerate(head) if row and all(_numeric(c) for c in row)), len(head))
+    named = [r for r, row in enumerate(head[:numbers]) if names <= {c.strip() for c in row}]
+    if not named:
+        return None
+    at = named[-1]
+    units = all(row and not any(_numeric(c) or not c.strip() for c in row) for row in rows[at + 1:numbers])
+    return at, numbers if units else at + 1
+
+
 def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | None, gaps: bool = False):
     """(data (n, k) for [time_col] + columns, time_col used, the file's rows before the data); with ``gaps``,
-    an empty value cell is NaN (the time column must be whole)."""
-    rows, delimiter = _rows(path)
-    if not rows:
+    an empty value cell is NaN (the time column must be whole).
+
+    The delimiter is the first of a comma, a tab, a semicolon and runs of blanks under which a row names
+    every column asked for (a comma first: a comma-separated file may hold semicolons in a text column;
+    a file separated by tabs or semicolons may write its numbers with decimal commas, which are then
+    read): a European spreadsheet's ``t;force;x`` with ``0,0015``, a LabVIEW or analyser text export's
+    tabs or aligned columns read as they are."""
+    lines = _lines(path)
+    if not lines:
         raise ValueError(f"{path}: empty file; expected a header row and data")
-    # the header is the first row that names every column asked for: lines before it are an instrument's
-    # preamble (its settings, a title), and rows after it that hold no number its units
-    at = next((r for r, row in enumerate(rows[:PREAMBLE]) if set(columns) <= {h.strip() for h in row}), 0)
+    names = set(columns) | ({time_col} if time_col else set())
+    delimiter, layout = next(((d, lay) for d in DELIMITERS
+                              if (lay := _layout(_cells(path, lines[:PREAMBLE], d), names)) is not None),
+                             (",", None))
+    rows = _cells(path, lines, delimiter)
+    at, first = layout or (0, 1)  # line ``first + 1`` of the file is the first of data
     header = [h.strip() for h in rows[at]]
-    units = 0
-    while at + 1 + units < len(rows) and units < 3 and not any(_numeric(c) for c in rows[at + 1 + units]):
-        units += 1
-    first = at + 1 + units  # line ``first + 1`` of the file is the first of data
-    comma = delimiter != "," and any("," in cell for row in rows[first:first + 2] for cell in row)  # 0,0015
+    comma = delimiter != ","  # 0,0015 (a cell without a comma reads the same)
     if time_col is None and fs_hz is None:
         time_col = next((c for c in TIME_NAMES if c in header), None)
         if time_col is None:
