@@ -316,6 +316,10 @@ def test_a_comma_table_keeps_its_commas_and_a_preamble_naming_the_channels_is_no
     late = tmp_path / "late.csv"
     late.write_text("t;base;tip1;tip2\n0;0;0;0\n1;0;0;0\n2;0,52;1,5;2,5\n")
     np.testing.assert_array_equal(read_csv(late, time_col="t").values[2], [0.52, 1.5, 2.5])
+    one = tmp_path / "one.csv"
+    one.write_text("x\n0,1429\n-2,5\n")
+    got = read_csv(one, fs_hz=10.0, base="x", tip1="x", tip2="x")
+    np.testing.assert_array_equal(got.values[:, 0], [0.1429, -2.5])
     named = tmp_path / "named.csv"
     named.write_text("Channels,base,tip1,tip2\nt,base,tip1,tip2\ns,m/s^2,m/s^2,m/s^2\n0,1,2,3\n0.5,4,5,6\n")
     got = read_csv(named, time_col="t")

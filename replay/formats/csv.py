@@ -97,9 +97,13 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
     if not lines:
         raise ValueError(f"{path}: empty file; expected a header row and data")
     names = set(columns) | ({time_col} if time_col else set())
-    delimiter, layout = next(((d, lay) for d in DELIMITERS
-                              if (lay := _layout(_cells(path, lines[:PREAMBLE], d), names)) is not None),
-                             (",", None))
+    found = [(d, lay, cells) for d in DELIMITERS
+             if (lay := _layout(cells := _cells(path, lines[:PREAMBLE], d), names)) is not None]
+    # first where the first data row has the header's cells: a one-column file of decimal commas splits at
+    # them under a comma ("0,1429" had read 0)
+    even = [(d, lay) for d, lay, cells in found
+            if lay[1] >= len(cells) or len(cells[lay[1]]) == len(cells[lay[0]])]
+    delimiter, layout = (even or [(d, lay) for d, lay, _ in found] or [(",", None)])[0]
     rows = _cells(path, lines, delimiter)
     at, first = layout or (0, 1)  # line ``first + 1`` of the file is the first of data
     header = [h.strip() for h in rows[at]]
