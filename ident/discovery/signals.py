@@ -343,7 +343,7 @@ def bridged(fs_hz: float, excitation: Channel, responses: tuple[Channel, ...], s
     through the bridge is not driven by what the structure felt there)."""
     kept, lost = [], []
     for ch in (excitation,) + tuple(responses):
-        y = np.array(ch.values, float)
+        y = np.asarray(ch.values, float)  # (as given where whole: copied, a column's layout changed round-off)
         bad = ~np.isfinite(y) if y.ndim == 1 else np.zeros(y.shape, bool)
         if bad.all() and y.size:
             if ch is excitation:
@@ -352,7 +352,7 @@ def bridged(fs_hz: float, excitation: Channel, responses: tuple[Channel, ...], s
                              "responses to analyse with --response)")
         if bad.any():
             at = np.arange(y.size)
-            y[bad] = np.interp(at[bad], at[~bad], y[~bad])
+            y = np.where(bad, np.interp(at, at[~bad], y[~bad]), y)
             edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
             lost += [Dropout(ch.name, start_s + a / fs_hz, start_s + b / fs_hz, float("nan"))
                      for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
