@@ -333,15 +333,16 @@ def _said(gaps: list[Dropout], most: int = 4) -> str:
     """The dropouts in words: a run missing from several channels at once (a lost frame) named once, and
     beyond ``most`` runs their count and the first of them."""
     lost: dict[tuple[float, float], list[str]] = {}
-    words = []
+    said = []  # (start, words)
     for g in gaps:
         if np.isnan(g.value):
             lost.setdefault((g.start_s, g.stop_s), []).append(g.name)
         else:
-            words.append(str(g))
+            said.append((g.start_s, str(g)))
     for (a, b), names in lost.items():
-        words.append(f"{', '.join(names)} hold{'' if len(names) > 1 else 's'} no number {span_text(a, b)} (bridged "
-                     "by interpolation)")
+        said.append((a, f"{', '.join(names)} hold{'' if len(names) > 1 else 's'} no number {span_text(a, b)} "
+                        "(bridged by interpolation)"))
+    words = [w for _, w in sorted(said, key=lambda x: x[0])]
     if len(words) > most:
         return f"{len(words)} runs, the first: " + "; ".join(words[:2])
     return "; ".join(words)
@@ -447,7 +448,8 @@ def noise_floor(d: Discovery, m: Measurement, reference: Measurement, settings: 
         raise ValueError("the reference must be the record's responses, sample for sample, in the same kinds")
     diff = Measurement(m.fs_hz, m.excitation, tuple(
         Channel(c.name, c.kind, np.asarray(c.values, float) - np.asarray(r.values, float))
-        for c, r in zip(m.responses, reference.responses) if c.name in d.prep.names), m.start_s)  # (none left out)
+        for c, r in zip(m.responses, reference.responses) if c.name in d.prep.names),  # those analysed (not dead)
+        m.start_s)
     ex = within_budget(m, settings.max_samples)
     if ex.step > 1:  # decimated alike (by the step alone: the span is cut below, as the record's was)
         diff = within_budget(diff, np.iinfo(np.int64).max, step=ex.step).measurement
