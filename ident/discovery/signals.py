@@ -272,8 +272,9 @@ def below_band(m: Measurement, band: tuple[float, float], share: float = 0.5) ->
 # independent generator's 168 stationary records of seeds 0-199, each response replaced by a constant and
 # noise reaches 0.049 and 0.174 at most; the true responses 0.11 or more with sixteenths (the least: seed 3, a
 # beam hitting a stopper 240 times its stiffness, chaotic), and the F-16's 0.70. A lightly damped mode
-# decays over more than a sixteenth of a short record, which lowers its coherence there (a 4.5 Hz mode at
-# 0.5 % damping, 5 s: 0.08), not with quarters (0.59): a response is undriven only if it is at both
+# decays over more than a sixteenth of a short record, which lowers its coherence there (two masses, modes at
+# 3.1 and 12.8 Hz damped 0.2 and 0.8 %, 5 s: 0.08), not with quarters (0.59): a response is undriven only if it
+# is at both
 UNDRIVEN_SHARE = {16: 0.08, 4: 0.25}
 
 
