@@ -16,8 +16,8 @@ from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import CLEAR, free_decay
-from ident.discovery.discover import (_fit_modal, _input_clipped, _undriven_left_out, _settle_by_backbone, _softening_look_alike, _warm,
-                                     noise_floor, sum_notes)
+from ident.discovery.discover import (_fit_modal, _input_clipped, _said, _settle_by_backbone, _softening_look_alike,
+                                     _undriven_left_out, _warm, noise_floor, sum_notes)
 from ident.discovery.baselines.modal import (Columns, ModalBaseline, _design, drivable, fit_model, peak_poles,
                                              underlying_poles)
 from ident.discovery.baselines.rig import RigBaseline
@@ -29,8 +29,8 @@ from ident.discovery.model import (Element, LinearModel, mode_states, nudging_ga
                                   without_feedthrough)
 from ident.discovery.search import (Candidate, Settings, choose, clustered_p, one_sign, paired_p, pieces_per_block,
                                     predict, signed_rank_p, significant)
-from ident.discovery.signals import (_first_motion, coherent_share, convert, first_family, force_window, frf, miso_frf,
-                                    bridged, dropouts, preliminary_band, prepare, undriven, within_budget)
+from ident.discovery.signals import (Dropout, _first_motion, bridged, coherent_share, convert, dropouts, first_family,
+                                    force_window, frf, miso_frf, preliminary_band, prepare, undriven, within_budget)
 from ident.discovery.split import by_energy, given, interleaved, transients
 from ident.rig import RigParams, simulate_measured_base
 
@@ -977,6 +977,10 @@ def test_a_dropout_is_left_out_and_named_and_a_quantised_sine_is_no_dropout():
     held[10000:11000] = held[9999]
     (g,) = dropouts(replace(quiet, responses=(Channel("x", "acceleration", held),)), band)
     assert g.start_s == 9.999 and 11.0 <= g.stop_s < 11.005  # (it holds 0, which the sine reads there too)
+    # a run two channels share is named once, runs in the order of time
+    two = [Dropout("a3", 2.0, 3.0, 0.0), Dropout("a2", 2.0, 3.0, 0.0), Dropout("x", 1.0, 1.02, float("nan"))]
+    assert _said(two) == ("x holds no number for 20 ms at 1.000 s (bridged by interpolation); a3, a2 read 0 from "
+                          "2.00 s to 3.00 s while the excitation moves")
 
 
 def test_a_dropout_in_the_only_training_slice_stays_and_short_missing_runs_are_bridged():

@@ -330,19 +330,21 @@ def _gaps(m: Measurement, band: tuple[float, float], notes: list[str], what: str
 
 
 def _said(gaps: list[Dropout], most: int = 4) -> str:
-    """The dropouts in words: a run missing from several channels at once (a lost frame) named once, and
-    beyond ``most`` runs their count and the first of them."""
-    lost: dict[tuple[float, float], list[str]] = {}
-    said = []  # (start, words)
+    """The dropouts in words, in the order of time: a run that several channels share (a lost frame; the
+    F-16's sine sweeps end with Acceleration2 and 3 both at 0) named once, and beyond ``most`` runs their
+    count and the first of them."""
+    runs: dict[tuple, list[str]] = {}
     for g in gaps:
-        if np.isnan(g.value):
-            lost.setdefault((g.start_s, g.stop_s), []).append(g.name)
+        runs.setdefault((g.start_s, g.stop_s, "nan" if np.isnan(g.value) else g.value), []).append(g.name)
+    words = []
+    for (a, b, value), names in sorted(runs.items(), key=lambda r: r[0][:2]):
+        many = len(names) > 1
+        if value == "nan":
+            words.append(f"{', '.join(names)} hold{'' if many else 's'} no number {span_text(a, b)} (bridged by "
+                         "interpolation)")
         else:
-            said.append((g.start_s, str(g)))
-    for (a, b), names in lost.items():
-        said.append((a, f"{', '.join(names)} hold{'' if len(names) > 1 else 's'} no number {span_text(a, b)} "
-                        "(bridged by interpolation)"))
-    words = [w for _, w in sorted(said, key=lambda x: x[0])]
+            words.append(f"{', '.join(names)} read{'' if many else 's'} {value:.4g} {span_text(a, b)} while the "
+                         "excitation moves")
     if len(words) > most:
         return f"{len(words)} runs, the first: " + "; ".join(words[:2])
     return "; ".join(words)

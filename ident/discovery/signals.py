@@ -318,16 +318,11 @@ def undriven(m: Measurement, band: tuple[float, float]) -> list[tuple[int, float
 class Dropout:
     """A response that reads one value, sample for sample, from ``start_s`` to ``stop_s`` (the record's time,
     as ``Measurement.start_s``) while the excitation moves: a loose connector, a lost sensor, a stalled
-    converter."""
+    converter; or, ``value`` NaN, a channel that held no number there (``bridged``)."""
     name: str
     start_s: float
     stop_s: float
     value: float
-
-    def __str__(self) -> str:
-        if np.isnan(self.value):
-            return f"{self.name} holds no number {span_text(self.start_s, self.stop_s)} (bridged by interpolation)"
-        return f"{self.name} reads {self.value:.4g} {span_text(self.start_s, self.stop_s)} while the excitation moves"
 
 
 def span_text(start_s: float, stop_s: float) -> str:
