@@ -1,7 +1,8 @@
-"""One-mode oscillators integrated apart from ``ident`` (RK4 in plain Python), so that the data the tests
-judge discovery on are not the method's own."""
+"""One-mode oscillators integrated apart from ``ident`` (RK4 in plain Python, or scipy's lsim for a linear one),
+so that the data the tests judge discovery on are not the method's own."""
 
 import numpy as np
+from scipy.signal import butter, lfilter, lsim
 
 
 def rk4(u: np.ndarray, fs: float, acc) -> tuple[np.ndarray, np.ndarray]:
@@ -21,3 +22,15 @@ def rk4(u: np.ndarray, fs: float, acc) -> tuple[np.ndarray, np.ndarray]:
         v += h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
         xs[i], vs[i] = x, v
     return xs, vs
+
+
+def linear_under_random_force(seed: int, seconds: float = 30.0, fs: float = 1000.0, hz: float = 15.0,
+                              zeta: float = 0.02, noise: float = 0.01) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """t, f, x of a one-mode oscillator (``hz``, ``zeta``) under a random force low-passed at 60 Hz (order-4
+    Butterworth), integrated by scipy (lsim), its displacement with ``noise`` x its RMS of white noise."""
+    t = np.arange(0, seconds, 1 / fs)
+    w = 2 * np.pi * hz
+    rng = np.random.default_rng(seed)
+    f = lfilter(*butter(4, 60 / (fs / 2)), rng.standard_normal(t.size))
+    _, x, _ = lsim(([1.0], [1.0, 2 * zeta * w, w * w]), f, t)
+    return t, f, x + noise * x.std() * rng.standard_normal(x.size)

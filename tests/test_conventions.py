@@ -57,15 +57,21 @@ def test_options_before_or_after_the_file(argv):
     assert any(line.startswith("played 1.00 s of data") for line in out.splitlines()), out
 
 
-def test_import_reads_export_as_it_is_holes_included(tmp_path):
-    """export writes the rows recorded (lost frames absent); import finds the time column and fills the
-    holes like a recording's: the samples come back the same."""
+def _recording_with_drops(tmp_path: Path) -> Path:
+    """3 s of the simulated rig recorded through the real pipeline, 1 % of its frames dropped on the way."""
     cfg = tmp_path / "drops.yaml"
     cfg.write_text("daq:\n  faults:\n    drop_frame_rate: 0.01\n")
     rec = tmp_path / "drops.mcap"
     code, _, err, _ = run_main(daq_main, ["record", "--port", f"rig://?config={cfg}", "--config", cfg, "--duration",
                                           "3", "-o", rec, "--quiet", "--no-identify"])
     assert code == 0, err
+    return rec
+
+
+def test_import_reads_export_as_it_is_holes_included(tmp_path):
+    """export writes the rows recorded (lost frames absent); import finds the time column and fills the
+    holes like a recording's: the samples come back the same."""
+    rec = _recording_with_drops(tmp_path)
     csv, back = tmp_path / "x.csv", tmp_path / "back.mcap"
     assert run_main(replay_main, ["export", rec, "--csv", csv])[0] == 0
     assert csv.read_text().splitlines()[0] == "t,seq,base,tip1,tip2"
@@ -85,12 +91,7 @@ def test_lost_frames_read_as_missing_values_for_discovery_wherever_they_are_kept
     """A recording that lost frames (the simulated rig drops 1 % of them) fills its holes for replay; read
     for discovery (``gaps``) those rows are NaN, from the recording and from its CSV export (holes in the time
     column) alike, and ``ident discover``'s reader bridges them and keeps each run, which discover leaves out."""
-    cfg = tmp_path / "drops.yaml"
-    cfg.write_text("daq:\n  faults:\n    drop_frame_rate: 0.01\n")
-    rec = tmp_path / "drops.mcap"
-    code, _, err, _ = run_main(daq_main, ["record", "--port", f"rig://?config={cfg}", "--config", cfg, "--duration",
-                                          "3", "-o", rec, "--quiet", "--no-identify"])
-    assert code == 0, err
+    rec = _recording_with_drops(tmp_path)
     filled = read_samples(rec).filled
     assert np.count_nonzero(filled) > 30
     names = ["base", "tip1", "tip2"]

@@ -16,10 +16,10 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from scipy.signal import butter, lfilter, lsim
 
 from clitools import run_main
 from daq.sim.hidden import hidden_case
+from oscillator import linear_under_random_force
 from ident.cli.bench_discovery import Case, Verdict, by_floor, by_strength, judge, report, twin_report
 from ident.cli.discover import stage_printer
 from ident.cli.main import main as ident_main
@@ -212,13 +212,7 @@ def test_missing_values_in_a_table_are_bridged_and_their_blocks_left_out(tmp_pat
     # logger exports it with lost packets: a run of NaN cells, a run of empty cells, and rows missing from
     # its time column. Refused before ("line 12002 holds NaN or inf"); each is now a dropout, named, bridged
     # and left out, and the record analysed
-    fs = 1000.0
-    t = np.arange(0, 30, 1 / fs)
-    w = 2 * np.pi * 15.0
-    rng = np.random.default_rng(2)
-    f = lfilter(*butter(4, 60 / (fs / 2)), rng.standard_normal(t.size))
-    _, x, _ = lsim(([1.0], [1.0, 2 * 0.02 * w, w * w]), f, t)
-    x = x + 0.01 * x.std() * rng.standard_normal(x.size)
+    t, f, x = linear_under_random_force(2)
     cells = [f"{v:.6g}" for v in x]
     cells[6000:6030] = ["NaN"] * 30
     cells[12000:12050] = [""] * 50

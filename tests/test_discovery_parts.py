@@ -14,6 +14,7 @@ from daq.sim.rig import RigConfig, simulate_rig
 from ident.discovery import Channel, Measurement, discover
 from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
+from oscillator import linear_under_random_force
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import CLEAR, free_decay
 from ident.discovery.discover import (_fit_modal, _input_clipped, _said, _settle_by_backbone, _softening_look_alike,
@@ -873,12 +874,7 @@ def test_a_clipped_excitation_is_named_and_a_synthesised_sine_is_not():
     # force as its sensor recorded it is clipped at 2 standard deviations (4.6 % of the samples). The
     # baseline holds the difference in its error and nothing had said why
     fs = 1000.0
-    t = np.arange(0, 30, 1 / fs)
-    w = 2 * np.pi * 15.0
-    rng = np.random.default_rng(0)
-    f = lfilter(*butter(4, 60 / (fs / 2)), rng.standard_normal(t.size))
-    _, x, _ = lsim(([1.0], [1.0, 2 * 0.02 * w, w * w]), f, t)
-    x = x + 0.01 * x.std() * rng.standard_normal(x.size)
+    t, f, x = linear_under_random_force(0)
     top = 2 * f.std()
     clipped = np.clip(f, -top, top)
     d = discover(Measurement(fs, Channel("force", "force", clipped), (Channel("x", "displacement", x),)))
@@ -943,12 +939,7 @@ def test_a_dropout_is_left_out_and_named_and_a_quantised_sine_is_no_dropout():
     # in, the baseline fits the step it makes and every cause is fitted to it (independent seeds 8 and 15,
     # nothing hidden: a contact and a joint named)
     fs = 1000.0
-    t = np.arange(0, 30, 1 / fs)
-    w = 2 * np.pi * 15.0
-    rng = np.random.default_rng(2)
-    f = lfilter(*butter(4, 60 / (fs / 2)), rng.standard_normal(t.size))
-    _, x, _ = lsim(([1.0], [1.0, 2 * 0.02 * w, w * w]), f, t)
-    x = x + 0.01 * x.std() * rng.standard_normal(x.size)
+    t, f, x = linear_under_random_force(2)
     stalled = x.copy()
     stalled[12000:14000] = x[11999]
     clean = discover(Measurement(fs, Channel("force", "force", f), (Channel("x", "displacement", x),)))
@@ -989,12 +980,7 @@ def test_a_dropout_in_the_only_training_slice_stays_and_short_missing_runs_are_b
     # 1 % of the record on every channel (a recording that lost frames one by one), are bridged and analysed:
     # each had cost its blocks, and together every block
     fs = 1000.0
-    t = np.arange(0, 30, 1 / fs)
-    w = 2 * np.pi * 15.0
-    rng = np.random.default_rng(2)
-    f = lfilter(*butter(4, 60 / (fs / 2)), rng.standard_normal(t.size))
-    _, x, _ = lsim(([1.0], [1.0, 2 * 0.02 * w, w * w]), f, t)
-    x = x + 0.01 * x.std() * rng.standard_normal(x.size)
+    t, f, x = linear_under_random_force(2)
     stalled = x.copy()
     stalled[5000:6000] = x[4999]
     m = Measurement(fs, Channel("force", "force", f), (Channel("x", "displacement", stalled),))
@@ -1002,7 +988,7 @@ def test_a_dropout_in_the_only_training_slice_stays_and_short_missing_runs_are_b
     (note,) = [n for n in d.notes if "a dropout" in n]
     assert "x reads" in note and "the last training or held-out data: cut the record" in note
     assert not d.split.excluded
-    lost = rng.choice(np.arange(100, t.size - 100), 300, replace=False)
+    lost = np.random.default_rng(3).choice(np.arange(100, t.size - 100), 300, replace=False)
     fg, xg = f.copy(), x.copy()
     fg[lost] = np.nan
     xg[lost] = np.nan

@@ -105,6 +105,7 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
             if lay[1] >= len(cells) or len(cells[lay[1]]) == len(cells[lay[0]])]
     delimiter, layout = (even or [(d, lay) for d, lay, _ in found] or [(",", None)])[0]
     rows = _cells(path, lines, delimiter)
+    del lines  # (the rows hold the text now: a file of gigabytes is not kept twice)
     at, first = layout or (0, 1)  # line ``first + 1`` of the file is the first of data
     header = [h.strip() for h in rows[at]]
     comma = delimiter != ","  # 0,0015 (a cell without a comma reads the same)
