@@ -1001,6 +1001,26 @@ def test_a_dropout_in_the_only_training_slice_stays_and_short_missing_runs_are_b
     assert not d.split.excluded and not d.findings and d.baseline_test_nrmse < 0.05
 
 
+def test_a_dropout_in_the_fit_data_leaves_the_baselines_fit_and_is_named_as_the_fit_datas():
+    # --fit-data: the baseline is fitted on another record of the same oscillator (15 Hz, 2 %, lsim), whose
+    # sensor stalls for 3 s. That record's blocks the stall reaches leave the baseline's fit and the note
+    # names them as the fit data's; the analysed record, clean, keeps every block
+    fs = 1000.0
+    _, f, x = linear_under_random_force(2)
+    _, f_fit, x_fit = linear_under_random_force(5)
+    stalled = x_fit.copy()
+    stalled[9000:12000] = x_fit[8999]
+    m = Measurement(fs, Channel("force", "force", f), (Channel("x", "displacement", x),))
+    fitted_on = {name: Measurement(fs, Channel("force", "force", f_fit), (Channel("x", "displacement", y),))
+                 for name, y in (("clean", x_fit), ("stalled", stalled))}
+    clean, d = (discover(m, fit_data=fitted_on[k]) for k in ("clean", "stalled"))
+    (note,) = [n for n in d.notes if "a dropout" in n]
+    assert note.startswith("fit data: left out blocks") and f"x reads {x_fit[8999]:.4g} from 9.00 s to 12.00 s" in note
+    assert not d.split.excluded and not d.findings
+    assert d.baseline_test_nrmse < 1.2 * clean.baseline_test_nrmse < 0.05
+    assert d.baseline.model.frequencies_hz[0] == pytest.approx(15.0, rel=0.01)
+
+
 def test_multiple_input_frf_conditions_out_a_correlated_second_input():
     # y = H u + G w with w made from u (a nonlinear force of the response is correlated with the input):
     # the single-input H1 estimate mixes G into H, the multiple-input one recovers H (digital filters,
