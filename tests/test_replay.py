@@ -320,6 +320,9 @@ def test_a_comma_table_keeps_its_commas_and_a_preamble_naming_the_channels_is_no
     one.write_text("x\n0,1429\n-2,5\n")
     got = read_csv(one, fs_hz=10.0, base="x", tip1="x", tip2="x")
     np.testing.assert_array_equal(got.values[:, 0], [0.1429, -2.5])
+    trailing = tmp_path / "trailing.csv"  # a logger that ends every line with its delimiter
+    trailing.write_text("t,base,tip1,tip2,\n0,1,2,3,\n0.5,4,5,6,,\n")
+    np.testing.assert_array_equal(read_csv(trailing, time_col="t").values, [[1, 2, 3], [4, 5, 6]])
     named = tmp_path / "named.csv"
     named.write_text("Channels,base,tip1,tip2\nt,base,tip1,tip2\ns,m/s^2,m/s^2,m/s^2\n0,1,2,3\n0.5,4,5,6\n")
     got = read_csv(named, time_col="t")
@@ -331,6 +334,9 @@ def test_a_comma_table_keeps_its_commas_and_a_preamble_naming_the_channels_is_no
     ("a,b,c\n1,2,3\n", ["--fs", "100"], "no column 'base'"),
     ("base,tip1,tip2\n1,2,3\n1,nan,3\n1,2,3\n", ["--fs", "100"], "line 3 holds NaN"),
     ("base,tip1,tip2\n1,2,3\n1,x,3\n", ["--fs", "100"], "line 3 has a missing or non-numeric value"),
+    # a comma table written with decimal commas: every number in two cells (read as 0, 5, 1 before)
+    ("base,tip1,tip2\n0,5,1,25,2,0\n0,6,1,5,2,1\n", ["--fs", "100"],
+     "line 2 holds 6 cells where the header names 3 columns (decimal commas in a comma-separated table?)"),
     ("t,base,tip1,tip2\n0,1,2,3\n0.1,1,2,3\n0.5,1,2,3\n", ["--time", "t"], "not uniformly sampled"),
     ("base,tip1,tip2\n1,2,3\n1,2,3\n", [], "no time column (t, time, time_s, t_s); give --time COL or --fs HZ"),
     ("t,base,tip1,tip2\n0,1,2,3\n0.1,1,2,3\n", ["--time", "t", "--fs", "10"], "exactly one of --time COL or --fs"),

@@ -121,6 +121,7 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
         raise ValueError(f"{path}: no column {missing[0]!r}; columns are: {', '.join(header)}")
     idx = [header.index(c) for c in wanted]
     blank = [None if time_col and j == 0 else (np.nan if gaps else None) for j in range(len(idx))]
+    width = len(rows[at])
     data = np.empty((len(rows) - first, len(idx)))
     for r, row in enumerate(rows[first:], start=first + 1):
         try:
@@ -128,6 +129,14 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
         except (ValueError, IndexError):
             raise ValueError(f"{path}: line {r} has a missing or non-numeric value in columns "
                              f"{', '.join(wanted)}") from None
+        if len(row) > width and any(c.strip() for c in row[width:]):
+            # a value in no column: the cells do not line up with the header, and which column a number
+            # belongs to is a guess (a comma table written with decimal commas splits every number in two:
+            # "0,001,3,2480" under "t,force" had read t = 0 and force = 1). Empty cells past the header
+            # (a logger's trailing delimiter) say nothing and are read past
+            raise ValueError(f"{path}: line {r} holds {len(row)} cells where the header names {width} columns "
+                             f"(decimal commas in a {'comma' if delimiter == ',' else repr(delimiter)}-separated "
+                             "table?); save it with one delimiter that no number holds")
     if len(data) < 2:
         raise ValueError(f"{path}: needs at least two data rows")
     where = lambda i: f"line {i + first + 1}"  # noqa: E731
