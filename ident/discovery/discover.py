@@ -34,8 +34,9 @@ from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline
                      choose, clipped_ranges, clipping_candidates, clustered_p, compensation, gain_candidates,
                      offset_findings, paired_p, pieces_per_block, predict, refine, regress, regressions, same_sensors,
                      score, significant, simulation_bound, spring_damper_responses, train_error)
-from .signals import (ORDER, UNDRIVEN_SHARE, Channel, Dropout, Measurement, Prepared, below_band, convert, dropouts,
-                      first_family, modal_band, preliminary_band, prepare, span_text, undriven, within_budget)
+from .signals import (HIT_RESPONSE, ORDER, UNDRIVEN_SHARE, Channel, Dropout, Measurement, Prepared, below_band,
+                      convert, dropouts, first_family, impulsive, modal_band, preliminary_band, prepare, span_text,
+                      undriven, within_budget)
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
 
@@ -288,12 +289,18 @@ def _undriven_left_out(m: Measurement, fit_data: Measurement | None, band: tuple
     dead = undriven(m, band)
     if not dead:
         return m, fit_data, []
-    named = ", ".join(f"{m.responses[i].name} {100 * s:.0f} %" for i, s in dead)
-    why = (f"the share of the power in the band coherent with the input {m.excitation.name} is {named}, where a "
-           f"response the input drives has {100 * UNDRIVEN_SHARE[16]:.0f} % or more")
+    if impulsive(m.excitation.values):
+        named = ", ".join(f"{m.responses[i].name} {r:.2g}" for i, r in dead)
+        why = (f"the hits of {m.excitation.name} leave no ringing: the cross-correlation with the force after the "
+               f"hits stands at {named} times its level before them, where a response the hits drive stands at "
+               f"{HIT_RESPONSE:g} times or more")
+    else:
+        named = ", ".join(f"{m.responses[i].name} {100 * s:.0f} %" for i, s in dead)
+        why = (f"the share of the power in the band coherent with the input {m.excitation.name} is {named}, where "
+               f"a response the input drives has {100 * UNDRIVEN_SHARE[16]:.0f} % or more")
     if len(dead) == len(m.responses):
         return m, fit_data, [f"no response is driven by the input: {why}; is {m.excitation.name} the "
-                             "channel that drove the structure? Every gain here is measured against a baseline of "
+                             "channel that drove the structure, and are the sensors live? Every gain here is measured against a baseline of "
                              "what the input does not make"]
     if keep:
         return m, fit_data, [f"{why}: a dead, unplugged or disconnected sensor? The rig model needs both "

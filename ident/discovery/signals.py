@@ -126,7 +126,10 @@ def impulsive(u: np.ndarray) -> bool:
     return bool(e[:k].sum() >= 0.9 * e.sum())
 
 
-def force_window(u: np.ndarray, fs_hz: float, pad_s: float = 0.002) -> np.ndarray:
+PAD_S = 0.002  # s: a hit's force window reaches this far on each side of it
+
+
+def force_window(u: np.ndarray, fs_hz: float, pad_s: float = PAD_S) -> np.ndarray:
     """A hammer record's force with what its channel reads between the hits set to the quiet level (the
     median): the force window of impact testing (Ewins, "Modal Testing", 2000). Between hits the
     channel reads its sensor's noise, not a force: driven by it, a model moves where the structure does
@@ -298,14 +301,48 @@ def coherent_share(u: np.ndarray, y: np.ndarray, fs_hz: float, band: tuple[float
     return float(np.sum(g[lines] * py[lines]) / total) if total > 0 else float("nan")
 
 
+# a hammer record's response that its first hit moves: its mean square over a stretch after the hit stands at
+# least this many times above the same over as long a stretch before it (``hit_response``). Measured (stop 73):
+# see the README's "a dead sensor on a hammer record"
+HIT_RESPONSE = 4.0
+MIN_BEFORE = 32  # samples of record before the first hit that ``hit_response`` needs at least
+
+
+def hit_response(u: np.ndarray, y: np.ndarray, fs_hz: float, band: tuple[float, float]) -> float:
+    """How far a hammer record's response ``y`` follows its first hit (force ``u``): its mean square about
+    its level before the hit, over up to a period of the band's low edge after the hit (its force window,
+    ``force_window``), over the same over as long a stretch before it. A response the hit drives rings after
+    it (at rest before, or far less moved); a dead sensor reads the same noise on both sides (about 1). The
+    stretch is as long as the record holds before the hit (an analyser's pre-trigger), at least
+    ``MIN_BEFORE`` samples; NaN where it holds fewer (a record that starts at its hit)."""
+    pad = max(1, int(round(PAD_S * fs_hz)))
+    h = hits(u)
+    first = int(np.argmax(h))
+    if not h[first] or first < MIN_BEFORE + pad:
+        return float("nan")
+    end = first + int(np.argmin(h[first:])) if not h[first:].all() else h.size
+    end += pad
+    n = min(max(16, int(fs_hz / band[0])), first - pad, h.size - end)
+    if n < MIN_BEFORE:
+        return float("nan")
+    y = np.asarray(y, float)
+    before = y[first - pad - n:first - pad]
+    rest = float(np.median(before))
+    return float(np.mean((y[end:end + n] - rest) ** 2) / max(float(np.mean((before - rest) ** 2)), 1e-300))
+
+
 def undriven(m: Measurement, band: tuple[float, float]) -> list[tuple[int, float]]:
-    """The responses (index, coherent share with sixteenths) that carry nothing the input drives: at each
+    """The responses (index, measure) that carry nothing the input drives. A stationary input: at each
     segment length of ``UNDRIVEN_SHARE`` their share of power coherent with it stays below what unrelated
-    signals reach (``coherent_share``). Not judged on a hammer record (one hit: its segments' coherence
-    says nothing) or on a record shorter than 16 x 64 samples."""
+    signals reach (``coherent_share``; the measure is that share with sixteenths). A hammer record, whose one
+    hit's segments' coherence says nothing: they do not ring after the hits (``hit_response`` below
+    ``HIT_RESPONSE``; the measure is it). Not judged on a record shorter than 16 x 64 samples."""
     u = np.asarray(m.excitation.values, float)
-    if m.n < max(UNDRIVEN_SHARE) * 64 or impulsive(u):
+    if m.n < max(UNDRIVEN_SHARE) * 64:
         return []
+    if impulsive(u):
+        ratios = [(i, hit_response(u, ch.values, m.fs_hz, band)) for i, ch in enumerate(m.responses)]
+        return [(i, r) for i, r in ratios if r < HIT_RESPONSE]
     out = []
     for i, ch in enumerate(m.responses):
         shares = {k: coherent_share(u, ch.values, m.fs_hz, band, k) for k in UNDRIVEN_SHARE}
