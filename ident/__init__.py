@@ -13,6 +13,21 @@ import os
 # the same value, which a test checks: ident cannot import daq)
 NUMPY_SIMD_PIN = "X86_V4 AVX512_ICL AVX512_SPR"
 os.environ.setdefault("NPY_DISABLE_CPU_FEATURES", NUMPY_SIMD_PIN)
+# and OpenBLAS to its Haswell kernels where the CPU has AVX2 and FMA, as ``daq`` does (the same value)
+BLAS_PIN = "Haswell"
+
+
+def _has_avx2() -> bool:
+    try:
+        with open("/proc/cpuinfo") as fh:
+            flags = next((line.split(":", 1)[1].split() for line in fh if line.startswith("flags")), [])
+    except OSError:
+        return False
+    return "avx2" in flags and "fma" in flags
+
+
+if _has_avx2():
+    os.environ.setdefault("OPENBLAS_CORETYPE", BLAS_PIN)
 
 from .library import PolynomialForcingLibrary  # noqa: E402 - after the pin
 from .model import SindyModel  # noqa: E402

@@ -131,3 +131,21 @@ def test_numpy_is_held_to_its_avx2_kernels_by_every_package_alike():
     out = subprocess.run([sys.executable, "-c", probe.format(pkg="ident")], capture_output=True, text=True,
                          env={**env, "NPY_DISABLE_CPU_FEATURES": "AVX512_SPR"}, check=True).stdout.split()
     assert out[1] == "AVX512_SPR"
+
+
+def test_openblas_is_held_to_its_haswell_kernels_where_the_cpu_has_avx2():
+    """daq/__init__.py says why (independent seed 116: a false finding with OpenBLAS's SkylakeX kernels).
+    In a fresh process that imports a package before numpy, numpy's and scipy's OpenBLAS run the Haswell
+    kernels on a CPU with AVX2 and FMA, and nothing is forced on one without; a user's own setting is kept."""
+    assert ident.BLAS_PIN == daq.BLAS_PIN == "Haswell" and ident._has_avx2() == daq._has_avx2()
+    probe = ("import {pkg}, os, numpy, scipy.linalg, threadpoolctl; "
+             "print(os.environ.get('OPENBLAS_CORETYPE'), *sorted({{i['architecture'] for i in "
+             "threadpoolctl.threadpool_info() if i['internal_api'] == 'openblas'}}))")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+    for pkg in ("ident", "daq", "replay"):
+        out = subprocess.run([sys.executable, "-c", probe.format(pkg=pkg)], capture_output=True, text=True,
+                             env=env, check=True).stdout.split()
+        assert out == (["Haswell", "Haswell"] if daq._has_avx2() else ["None", *out[1:]]), (pkg, out)
+    out = subprocess.run([sys.executable, "-c", probe.format(pkg="ident")], capture_output=True, text=True,
+                         env={**env, "OPENBLAS_CORETYPE": "Sandybridge"}, check=True).stdout.split()
+    assert out == ["Sandybridge", "Sandybridge"]
