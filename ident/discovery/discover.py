@@ -291,17 +291,17 @@ def _undriven_left_out(m: Measurement, fit_data: Measurement | None, band: tuple
         return m, fit_data, []
     if impulsive(m.excitation.values):
         named = ", ".join(f"{m.responses[i].name} {r:.2g}" for i, r in dead)
-        why = (f"the hits of {m.excitation.name} leave no ringing: the cross-correlation with the force after the "
-               f"hits stands at {named} times its level before them, where a response the hits drive stands at "
-               f"{HIT_RESPONSE:g} times or more")
+        why = (f"the hits of {m.excitation.name} leave no ringing: the mean square after the first hit stands at "
+               f"{named} times its level before it, where a response the hit drives stands at {HIT_RESPONSE:g} "
+               "times or more")
     else:
         named = ", ".join(f"{m.responses[i].name} {100 * s:.0f} %" for i, s in dead)
         why = (f"the share of the power in the band coherent with the input {m.excitation.name} is {named}, where "
                f"a response the input drives has {100 * UNDRIVEN_SHARE[16]:.0f} % or more")
     if len(dead) == len(m.responses):
         return m, fit_data, [f"no response is driven by the input: {why}; is {m.excitation.name} the "
-                             "channel that drove the structure, and are the sensors live? Every gain here is measured against a baseline of "
-                             "what the input does not make"]
+                             "channel that drove the structure, and are the sensors live? Every gain here is "
+                             "measured against a baseline of what the input does not make"]
     if keep:
         return m, fit_data, [f"{why}: a dead, unplugged or disconnected sensor? The rig model needs both "
                              "tips, so it stays in the analysis"]

@@ -134,9 +134,10 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
             # belongs to is a guess (a comma table written with decimal commas splits every number in two:
             # "0,001,3,2480" under "t,force" had read t = 0 and force = 1). Empty cells past the header
             # (a logger's trailing delimiter) say nothing and are read past
-            raise ValueError(f"{path}: line {r} holds {len(row)} cells where the header names {width} columns "
-                             f"(decimal commas in a {'comma' if delimiter == ',' else repr(delimiter)}-separated "
-                             "table?); save it with one delimiter that no number holds")
+            hint = " (decimal commas in a comma-separated table?)" if delimiter == "," else ""
+            raise ValueError(f"{path}: line {r} holds {len(row)} cells where the header names {width} "
+                             f"columns{hint}; save it with one delimiter that no number holds and a name for "
+                             "every column")
     if len(data) < 2:
         raise ValueError(f"{path}: needs at least two data rows")
     where = lambda i: f"line {i + first + 1}"  # noqa: E731
