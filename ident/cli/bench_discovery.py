@@ -29,6 +29,8 @@ from pathlib import Path
 import numba
 import numpy as np
 import scipy
+import scipy.linalg  # noqa: F401 - scipy's OpenBLAS loaded, so that ``blas_kernels`` names it too
+from threadpoolctl import threadpool_info
 from numpy._core._multiarray_umath import __cpu_features__ as CPU_FEATURES  # numpy's kernels in use
 from daq.safeio import PartFile, part_path
 from daq.sim.hidden import hidden_case
@@ -425,7 +427,14 @@ def environment() -> str:
         pass
     return (f"numpy {np.__version__}, scipy {scipy.__version__}, numba {numba.__version__}, "
             f"Python {platform.python_version()}, {cpu}, one BLAS thread per case, numpy's SIMD kernels "
-            f"{simd_level()}")
+            f"{simd_level()}, OpenBLAS kernels {blas_kernels()}")
+
+
+def blas_kernels() -> str:
+    """The kernel sets numpy's and scipy's OpenBLAS run (held to Haswell's where the CPU has AVX2: see
+    daq/__init__.py), and what OPENBLAS_CORETYPE says."""
+    kinds = sorted({str(i.get("architecture")) for i in threadpool_info() if i.get("internal_api") == "openblas"})
+    return f"{'/'.join(kinds) or 'none'} (OPENBLAS_CORETYPE={os.environ.get('OPENBLAS_CORETYPE', '')!r})"
 
 
 def simd_level() -> str:
