@@ -321,7 +321,7 @@ def test_a_comma_table_keeps_its_commas_and_a_preamble_naming_the_channels_is_no
     got = read_csv(one, fs_hz=10.0, base="x", tip1="x", tip2="x")
     np.testing.assert_array_equal(got.values[:, 0], [0.1429, -2.5])
     trailing = tmp_path / "trailing.csv"  # a logger that ends every line with its delimiter
-    trailing.write_text("t,base,tip1,tip2,\n0,1,2,3,\n0.5,4,5,6,,\n")
+    trailing.write_text("t,base,tip1,tip2,\n0,1,2,3,\n0.5,4,5,6,,bad hit\n")  # and an unheaded remark
     np.testing.assert_array_equal(read_csv(trailing, time_col="t").values, [[1, 2, 3], [4, 5, 6]])
     named = tmp_path / "named.csv"
     named.write_text("Channels,base,tip1,tip2\nt,base,tip1,tip2\ns,m/s^2,m/s^2,m/s^2\n0,1,2,3\n0.5,4,5,6\n")

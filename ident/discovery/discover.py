@@ -290,10 +290,10 @@ def _undriven_left_out(m: Measurement, fit_data: Measurement | None, band: tuple
     if not dead:
         return m, fit_data, []
     if impulsive(m.excitation.values):
-        named = ", ".join(f"{m.responses[i].name} {r:.2g}" for i, r in dead)
-        why = (f"the hits of {m.excitation.name} leave no ringing: the mean square after the first hit stands at "
-               f"{named} times its level before it, where a response the hit drives stands at {HIT_RESPONSE:g} "
-               "times or more")
+        named = ", ".join(f"{m.responses[i].name}'s at {r:.2g} times" for i, r in dead)
+        why = (f"the hits of {m.excitation.name} leave no ringing: the mean square after a hit stands at most "
+               f"{named} its level before it, where a response the hits drive stands at {HIT_RESPONSE:g} times "
+               "or more")
     else:
         named = ", ".join(f"{m.responses[i].name} {100 * s:.0f} %" for i, s in dead)
         why = (f"the share of the power in the band coherent with the input {m.excitation.name} is {named}, where "

@@ -301,34 +301,41 @@ def coherent_share(u: np.ndarray, y: np.ndarray, fs_hz: float, band: tuple[float
     return float(np.sum(g[lines] * py[lines]) / total) if total > 0 else float("nan")
 
 
-# a hammer record's response that its first hit moves: its mean square over a stretch after the hit stands at
-# least this many times above the same over as long a stretch before it (``hit_response``). Measured (stop 73):
+# a hammer record's response that its hits move: its mean square over a stretch after a hit stands at least
+# this many times above the same over a stretch before it (``hit_response``). Measured (stop 73):
 # see the README's "a dead sensor on a hammer record"
 HIT_RESPONSE = 4.0
-MIN_BEFORE = 32  # samples of record before the first hit that ``hit_response`` needs at least
+MIN_BEFORE = 32  # samples of record before a hit (besides its force window) that ``hit_response`` needs at least
+MAX_HITS = 50  # hits ``hit_response`` looks at, the first ones
 
 
 def hit_response(u: np.ndarray, y: np.ndarray, fs_hz: float, band: tuple[float, float]) -> float:
-    """How far a hammer record's response ``y`` follows its first hit (force ``u``): its mean square about
-    its level before the hit, over up to a period of the band's low edge after the hit (its force window,
-    ``force_window``), over the same over as long a stretch before it. A response the hit drives rings after
-    it (at rest before, or far less moved); a dead sensor reads the same noise on both sides (about 1). The
-    stretch is as long as the record holds before the hit (an analyser's pre-trigger), at least
-    ``MIN_BEFORE`` samples; NaN where it holds fewer (a record that starts at its hit)."""
+    """How far a hammer record's response ``y`` follows its hits (force ``u``): for each hit with a stretch
+    of record before it that no earlier hit's force window reaches, the response's mean square about its
+    level there over up to a period of the band's low edge after the hit (its force window,
+    ``force_window``), over its mean square over that stretch; the largest over the hits. A response the
+    hits drive rings after a hit where it was at rest, or far less moved, before it; a dead sensor reads the
+    same noise on both sides (about 1). The stretch before is up to a period, at least ``MIN_BEFORE``
+    samples (an analyser's pre-trigger); NaN where no hit has that (a record that starts at its hit).
+    The largest, not the first: a record cut from a series, or a first tap, has a hit whose before still
+    rings from the one before it."""
     pad = max(1, int(round(PAD_S * fs_hz)))
+    period = max(16, int(fs_hz / band[0]))
     h = hits(u)
-    first = int(np.argmax(h))
-    if not h[first] or first < MIN_BEFORE + pad:
-        return float("nan")
-    end = first + int(np.argmin(h[first:])) if not h[first:].all() else h.size
-    end += pad
-    n = min(max(16, int(fs_hz / band[0])), first - pad, h.size - end)
-    if n < MIN_BEFORE:
-        return float("nan")
+    edges = np.flatnonzero(np.diff(np.r_[0, h.astype(np.int8), 0]))
     y = np.asarray(y, float)
-    before = y[first - pad - n:first - pad]
-    rest = float(np.median(before))
-    return float(np.mean((y[end:end + n] - rest) ** 2) / max(float(np.mean((before - rest) ** 2)), 1e-300))
+    best, clear = float("nan"), 0  # clear: where the record is free of the last hit's force window
+    for start, stop in zip(edges[::2][:MAX_HITS], edges[1::2][:MAX_HITS]):
+        first, end = int(start) - pad, int(stop) + pad
+        n = min(period, first - clear)
+        clear = end
+        if n < MIN_BEFORE or end + MIN_BEFORE > y.size:
+            continue
+        before = y[first - n:first]
+        rest = float(np.median(before))
+        ratio = float(np.mean((y[end:end + period] - rest) ** 2) / max(float(np.mean((before - rest) ** 2)), 1e-300))
+        best = ratio if not best >= ratio else best
+    return best
 
 
 def undriven(m: Measurement, band: tuple[float, float]) -> list[tuple[int, float]]:

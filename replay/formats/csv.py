@@ -129,11 +129,11 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
         except (ValueError, IndexError):
             raise ValueError(f"{path}: line {r} has a missing or non-numeric value in columns "
                              f"{', '.join(wanted)}") from None
-        if len(row) > width and any(c.strip() for c in row[width:]):
-            # a value in no column: the cells do not line up with the header, and which column a number
+        if len(row) > width and any(_numeric(c) for c in row[width:] if c.strip()):
+            # a number in no column: the cells do not line up with the header, and which column a number
             # belongs to is a guess (a comma table written with decimal commas splits every number in two:
             # "0,001,3,2480" under "t,force" had read t = 0 and force = 1). Empty cells past the header
-            # (a logger's trailing delimiter) say nothing and are read past
+            # (a logger's trailing delimiter) and text there (a logger's unheaded remark) are read past
             hint = " (decimal commas in a comma-separated table?)" if delimiter == "," else ""
             raise ValueError(f"{path}: line {r} holds {len(row)} cells where the header names {width} "
                              f"columns{hint}; save it with one delimiter that no number holds and a name for "
