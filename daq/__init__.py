@@ -18,10 +18,12 @@ os.environ.setdefault("NPY_DISABLE_CPU_FEATURES", NUMPY_SIMD_PIN)
 
 # OpenBLAS, numpy's and scipy's linear algebra, picks its kernels by the CPU as well: on an AVX-512 machine
 # its SkylakeX ones, whose sums round otherwise than its Haswell (AVX2) ones (an AMD machine without AVX-512
-# runs its Zen set, built on those). Independent seed 116 (nothing hidden) had a false quadratic damping named with the
-# SkylakeX kernels, "nothing" with the Haswell ones (stop 73: 1 of 14 "none" cases found something on
-# such a host). So OpenBLAS is held to its Haswell kernels where the CPU has AVX2 and FMA (forced on a CPU
-# without them, it would stop at an illegal instruction); setting OPENBLAS_CORETYPE yourself chooses otherwise.
+# runs its Zen set, built on those). Independent seed 116 (nothing hidden) had a false quadratic damping
+# named with the SkylakeX kernels, "nothing" with the Haswell ones (stop 73: 1 of 14 "none" cases found
+# something on such a host). So OpenBLAS is held to its Haswell kernels where the CPU has AVX2 and FMA
+# (forced on a CPU without them, it would stop at an illegal instruction); setting OPENBLAS_CORETYPE
+# yourself chooses otherwise. ``ident`` carries the same lines: it cannot import daq, and daq does not
+# import ident's 1.2 s of modules to share seven lines (a test checks they agree).
 BLAS_PIN = "Haswell"
 
 

@@ -14,7 +14,7 @@ from daq.sim.rig import RigConfig, simulate_rig
 from ident.discovery import Channel, Measurement, discover
 from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
-from oscillator import linear_under_random_force
+from oscillator import linear_under_random_force, two_masses_pushed
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import CLEAR, free_decay
 from ident.discovery.discover import (_fit_modal, _input_clipped, _said, _settle_by_backbone, _softening_look_alike,
@@ -898,15 +898,7 @@ def test_a_dead_sensor_is_left_out_and_named_and_the_rest_is_analysed():
     t = np.arange(0, 40, 1 / fs)
     rng = np.random.default_rng(4)
     f = lfilter(*butter(4, 40 / (fs / 2)), rng.standard_normal(t.size))
-    k1, k2 = 800.0, 3000.0
-    K = np.array([[k1 + k2, -k2], [-k2, k2]])
-    w = np.sqrt(np.linalg.eigvalsh(K))
-    C = 0.04 / w.mean() * K
-    A = np.block([[np.zeros((2, 2)), np.eye(2)], [-K, -C]])
-    B = np.array([[0.0], [0.0], [1.0], [0.0]])
-    Cacc = np.hstack([-K, -C])
-    _, y, _ = lsim((A, B, Cacc, np.array([[1.0], [0.0]])), f, t)
-    y = y + 0.01 * y.std(axis=0) * rng.standard_normal(y.shape)
+    y = two_masses_pushed(f, fs, rng)
     dead = 0.3 + 0.01 * y[:, 0].std() * rng.standard_normal(t.size)
     m = Measurement(fs, Channel("force", "force", f), (Channel("a1", "acceleration", y[:, 0]),
                                                         Channel("dead", "acceleration", dead),
@@ -947,13 +939,7 @@ def test_a_dead_sensor_on_a_hammer_record_is_one_its_hits_leave_without_ringing(
     for at in (1.0, 6.0):
         i = int(at * fs)
         f[i:i + pulse.size] += 50.0 * pulse
-    k1, k2 = 800.0, 3000.0
-    K = np.array([[k1 + k2, -k2], [-k2, k2]])
-    w = np.sqrt(np.linalg.eigvalsh(K))
-    C = 0.04 / w.mean() * K
-    A = np.block([[np.zeros((2, 2)), np.eye(2)], [-K, -C]])
-    _, y, _ = lsim((A, np.array([[0.0], [0.0], [1.0], [0.0]]), np.hstack([-K, -C]), np.array([[1.0], [0.0]])), f, t)
-    y = y + 0.01 * y.std(axis=0) * rng.standard_normal(y.shape)
+    y = two_masses_pushed(f, fs, rng)
     dead = 0.3 + 0.01 * y[:, 0].std() * rng.standard_normal(t.size)
     m = Measurement(fs, Channel("force", "force", f), (Channel("a1", "acceleration", y[:, 0]),
                                                         Channel("laser", "acceleration", dead),

@@ -334,7 +334,7 @@ def hit_response(u: np.ndarray, y: np.ndarray, fs_hz: float, band: tuple[float, 
         before = y[first - n:first]
         rest = float(np.median(before))
         ratio = float(np.mean((y[end:end + period] - rest) ** 2) / max(float(np.mean((before - rest) ** 2)), 1e-300))
-        best = ratio if not best >= ratio else best
+        best = ratio if np.isnan(best) else max(best, ratio)
     return best
 
 
