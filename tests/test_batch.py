@@ -168,6 +168,57 @@ def test_discover_rows_name_the_hidden_sensor_gain(tmp_path):
     assert json.loads(row["settings"])["model_sha256"] and "findings: sensor_gain at" in stdout
 
 
+def _strip_notes(path: Path) -> None:
+    """The table as a batch before ``discover_notes`` wrote it: that column gone, the rest as they were."""
+    rows = table(path)
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, batch.BEFORE_NOTES, lineterminator="\n")
+        w.writeheader()
+        w.writerows({c: r[c] for c in batch.BEFORE_NOTES} for r in rows)
+
+
+def test_discover_rows_keep_the_notes_and_an_older_table_gets_them_on_the_next_run(tmp_path):
+    _tiny_rig_csv(tmp_path / "raw.csv", 3)
+    s = read_samples(tmp_path / "raw.csv")
+    v = s.values.copy()
+    v[500:750, 2] = v[500, 2]  # tip 2 reads one value from 1.0 to 1.5 s: a loose connector
+    write_samples(tmp_path / "loose.csv", Samples(s.t, v, s.fs_hz, np.arange(len(v)), "loose.csv"))
+    model = tmp_path / "rig.yaml"
+    model.write_text("rig:\n  beam1: {gap_pos_m: .inf, gap_neg_m: .inf}\n  beam2: {gap_pos_m: .inf, gap_neg_m: .inf}\n")
+    out = tmp_path / "results.csv"
+    argv = ["batch", tmp_path / "loose.csv", "--discover", "--model", model, "--workers", "0", "--no-progress", "-o", out]
+    code, stdout, err, tb = run_main(ident_main, argv)
+    assert code == 0 and tb is None, err
+    (row,) = table(out)
+    notes = json.loads(row["discover_notes"])
+    m = Measurement(s.fs_hz, Channel("base", "base_acceleration", v[:, 0]),
+                    (Channel("tip1", "acceleration", v[:, 1]), Channel("tip2", "acceleration", v[:, 2])))
+    d = discover(m, rig=load_model(model))  # the same record run apart: the row holds its notes, all of them
+    assert notes == d.notes and any("tip2" in n and "1.00 s" in n for n in notes), notes
+    assert "discovery left notes on 1 recording " in stdout
+
+    _strip_notes(out)  # a table from before the column: its discover row is analysed again, the notes filled in
+    code, stdout, err, tb = run_main(ident_main, argv)
+    assert code == 0 and tb is None and "0 already in" in stdout and "1 to analyse" in stdout, err
+    (again,) = table(out)
+    assert tuple(again) == batch.COLUMNS and json.loads(again["discover_notes"]) == notes
+    code, stdout, err, _ = run_main(ident_main, argv)
+    assert code == 0 and "1 already in" in stdout
+
+
+def test_an_older_table_without_discovery_keeps_its_rows(tmp_path):
+    shutil.copy(REC / "linear.mcap", tmp_path / "a.mcap")
+    out = tmp_path / "results.csv"
+    argv = ["batch", tmp_path / "a.mcap", "--regimes", "--workers", "0", "--no-progress", "-o", out]
+    assert run_main(ident_main, argv)[0] == 0
+    (first,) = table(out)
+    _strip_notes(out)
+    code, stdout, err, _ = run_main(ident_main, argv)
+    assert code == 0 and "1 already in" in stdout and "0 to analyse" in stdout, err
+    (row,) = table(out)
+    assert tuple(row) == batch.COLUMNS and row == first  # kept as it was, written back with the new column
+
+
 def test_report_has_titled_figures_and_lists_the_recordings(example_table, tmp_path):
     serial, _ = example_table
     rep = tmp_path / "report"

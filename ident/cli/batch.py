@@ -11,7 +11,7 @@ A command line composing readers, like ``ident discover``: each task reads its f
   the verdict, findings with parameters and held-out gains.
 
 The table (``-o RESULTS.csv``) is CSV with JSON in the columns that hold lists (regimes, equations,
-findings): one file any spreadsheet, pandas (``pd.read_csv``) or the csv module opens, no further
+findings, discovery's notes): one file any spreadsheet, pandas (``pd.read_csv``) or the csv module opens, no further
 dependency, and small enough (a few thousand rows) to be rewritten whole at every save, which keeps each
 write atomic. Rows are sorted by file. A file that
 fails is a row with its error and the batch goes on; the table is rewritten atomically (``daq.safeio``)
@@ -59,8 +59,11 @@ COLUMNS = ("file", "format", "bytes", "modified", "settings", "fs_hz", "duration
            "regimes", "regime_durations_s", "regime_changes", "regime_note",
            "fit_segment_s", "beam1_natural_frequency_hz", "beam2_natural_frequency_hz", "beam1_nrmse",
            "beam2_nrmse", "beam1_equations", "beam2_equations", "fit_note",
-           "verdict", "n_findings", "gain", "findings",
+           "verdict", "n_findings", "gain", "findings", "discover_notes",
            "error", "seconds")
+# a table written before ``discover_notes`` (stop 74) is continued: its rows are kept, and those its --discover
+# analysed are analysed again, since their notes (a dead sensor, a dropout, a clipped input) were not kept
+BEFORE_NOTES = tuple(c for c in COLUMNS if c != "discover_notes")
 WRITE_EVERY_S = 1.0
 
 
@@ -169,7 +172,7 @@ def _discover(s, settings: Settings) -> dict:
     findings = [{**candidate_json(c, m.fs_hz), "ambiguous_with": [a.label for a in alike]}
                 for c, alike in zip(d.findings, d.ambiguous)]
     return {"verdict": d.verdict(), "n_findings": len(findings), "gain": d.gain if findings else "",
-            "findings": _json(findings)}
+            "findings": _json(findings), "discover_notes": _json(d.notes)}
 
 
 RUN = {"regimes": _regimes, "fit": _fit, "discover": _discover}
@@ -252,14 +255,15 @@ def expand(patterns: list[str]) -> list[str]:
 
 
 def read_table(path: Path) -> dict[str, dict]:
-    """The rows of an existing table by file; refused (one line) if it is not a table of this command."""
+    """The rows of an existing table by file (one written before ``discover_notes`` with that column empty);
+    refused (one line) if it is not a table of this command."""
     try:
         with open(path, newline="") as fh:
             reader = csv.DictReader(fh)
-            if tuple(reader.fieldnames or ()) != COLUMNS:
+            if tuple(reader.fieldnames or ()) not in (COLUMNS, BEFORE_NOTES):
                 raise ValueError(f"-o {path} exists and is not an ident batch table (its columns differ); give "
                                  f"--force to replace it, or another -o")
-            return {r["file"]: r for r in reader}
+            return {r["file"]: {c: r.get(c, "") for c in COLUMNS} for r in reader}
     except (UnicodeDecodeError, csv.Error):
         raise ValueError(f"-o {path} exists and is not an ident batch table; give --force to replace it, or "
                          f"another -o") from None
@@ -291,8 +295,11 @@ class TableFile:
 
 
 def is_done(row: dict | None, ident: dict, signature: str) -> bool:
+    """The row holds this version of the file analysed with these settings, without an error, and (a row of a
+    table from before ``discover_notes``) with its discovery's notes."""
     return (row is not None and not row["error"] and row["settings"] == signature and row["bytes"] == ident["bytes"]
-            and row["modified"] == ident["modified"])
+            and row["modified"] == ident["modified"]
+            and not ("discover" in json.loads(signature)["analyses"] and not row["discover_notes"]))
 
 
 def _sha256(path: Path) -> str:
@@ -435,4 +442,8 @@ def summary(rows: list[dict], path: Path) -> str:
         nothing = sum(1 for r in rows if r["verdict"] and r["n_findings"] == "0")
         lines.append("findings: " + (", ".join(f"{k} {v}" for k, v in sorted(causes.items(), key=lambda x: -x[1]))
                                      or "none") + f"; nothing found in {nothing}")
+        noted = sum(1 for r in rows if json.loads(r["discover_notes"] or "[]"))
+        if noted:
+            lines.append(f"discovery left notes on {noted} recording{'s' * (noted > 1)} (a dead sensor, a dropout, a "
+                         f"clipped input, a blow, a failed candidate: column 'discover_notes')")
     return "\n".join(lines)

@@ -210,6 +210,17 @@ def write_report(rows: list[dict], folder: Path, table: Path) -> None:
         md += ["## Findings (first finding per recording)", "", "| finding | recordings |", "|---|---|"]
         md += [f"| {k} | {v} |" for k, v in sorted(counts.items(), key=lambda kv: -kv[1])]
         md += ["", "![findings](findings.png)", ""]
+        noted = [(r, _loads(r["discover_notes"], [])) for r in rows]
+        noted = [(r, n) for r, n in noted if n]
+        if noted:
+            md += [f"Discovery left notes on {len(noted)} recording(s) (column `discover_notes`), the first three of "
+                   "each here:", ""]
+            for r, notes in noted[:10]:
+                md.append(f"- `{Path(r['file']).name}`: " + "; ".join(_cell(n) for n in notes[:3])
+                          + (f"; ... {len(notes) - 3} more" if len(notes) > 3 else ""))
+            if len(noted) > 10:
+                md.append(f"- ... and {len(noted) - 10} more")
+            md.append("")
     if bad:
         md += ["## Errors", "", "| # | file | error |", "|---|---|---|"]
         md += [f"| {rows.index(r)} | `{Path(r['file']).name}` | {_cell(r['error'])} |" for r in bad]
