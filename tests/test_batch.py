@@ -196,6 +196,10 @@ def test_discover_rows_keep_the_notes_and_an_older_table_gets_them_on_the_next_r
     d = discover(m, rig=load_model(model))  # the same record run apart: the row holds its notes, all of them
     assert notes == d.notes and any("tip2" in n and "1.00 s" in n for n in notes), notes
     assert "discovery left notes on 1 recording " in stdout
+    code, _, err, tb = run_main(ident_main, argv + ["--report", tmp_path / "report"])  # the row kept, reported
+    md = (tmp_path / "report" / "README.md").read_text()
+    assert code == 0 and tb is None and "Discovery left notes on 1 recording(s)" in md, err
+    assert f"- `loose.csv`: {notes[0].replace('|', '/')}" in md
 
     _strip_notes(out)  # a table from before the column: its discover row is analysed again, the notes filled in
     code, stdout, err, tb = run_main(ident_main, argv)
