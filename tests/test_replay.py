@@ -297,6 +297,13 @@ def test_a_table_separated_by_semicolons_tabs_or_blanks_reads_as_its_comma_separ
                                                        for row in [header, ["s", "m/s^2", "m/s^2", "m/s^2"]] + cells)
                                            + "\n")
     forms["preamble.txt"] = (";", ",")
+    # Excel's "CSV UTF-8" (a byte-order mark before the header, CRLF) and a logger that ends with blank lines
+    # or a row of empty cells (the F-16 benchmark's CSVs end with a blank line): each had been refused, the
+    # first as "no column 't'", the second as "line N has a missing or non-numeric value"
+    comma = (tmp_path / "comma.csv").read_text()
+    (tmp_path / "excel.csv").write_bytes(b"\xef\xbb\xbf" + comma.replace("\n", "\r\n").encode())
+    (tmp_path / "trailing.csv").write_text(comma + "\n,,,\n\n")
+    forms.update({"excel.csv": (",", "."), "trailing.csv": (",", ".")})
     want = read_csv(tmp_path / "comma.csv", time_col="t")
     assert want.fs_hz == pytest.approx(1000.0)
     np.testing.assert_allclose(want.values, v, rtol=1e-5)

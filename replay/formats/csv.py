@@ -32,14 +32,17 @@ def _lines(path: Path) -> list[str]:
     try:
         if path.stat().st_size > MAX_BYTES:
             raise ValueError(f"{path}: larger than {MAX_BYTES >> 30} GiB")
-        with open(path, newline="") as fh:
-            return fh.readlines()
+        with open(path, newline="", encoding="utf-8-sig") as fh:  # (-sig: Excel's "CSV UTF-8" starts with a BOM)
+            lines = fh.readlines()
     except FileNotFoundError:
         raise ValueError(f"{path}: no such file") from None
     except IsADirectoryError:
         raise ValueError(f"{path}: is a folder; give a CSV file") from None
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path}: not a text CSV file ({str(exc)[:60]})") from None
+    while lines and not lines[-1].strip(" \t\r\n,;"):  # blank lines (or empty cells) at the end: read past
+        lines.pop()
+    return lines
 
 
 def _cells(path: Path, lines: list[str], delimiter: str) -> list[list[str]]:
