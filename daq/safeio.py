@@ -94,18 +94,21 @@ def check_outputs(outputs: Sequence[Output], inputs: Iterable[str | Path | None]
             if p.is_dir() and any(p.iterdir()) and not force:
                 raise ValueError(f"{_describe(o)} exists and is not empty; give --force to write into it "
                                  f"(only the report's own files are replaced)")
-            continue
-        if os.path.lexists(p):
+        elif os.path.lexists(p):
             if not o.replaceable:
                 raise ValueError(f"{p} exists (an earlier recording cut short?): recover it with "
                                  f"`replay recover {p} -o FIXED.mcap` or remove it")
             if not force:
                 raise ValueError(f"{_describe(o)} exists; give --force to replace it")
-        parent = p.parent
+        # where it will be written (the folder itself, or the nearest existing folder above it, where the
+        # missing ones are made): checked now, not after an analysis of minutes
+        parent = p if o.folder and p.is_dir() else p.parent
         while not parent.exists() and parent != parent.parent:
             parent = parent.parent
         if not parent.is_dir():
             raise ValueError(f"{_describe(o)}: {parent} is not a folder")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise ValueError(f"{_describe(o)}: cannot write in {parent} (read-only, or not yours)")
     for k, a in enumerate(outs):
         for b in outs[k + 1:]:
             if same_file(a.path, b.path):

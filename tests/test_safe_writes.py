@@ -121,6 +121,7 @@ def cases(w: Path):
     out.append(("ident fit --json a --report a", ident_main, ["fit", rec, "--json", w / "r", "--report", w / "r"],
                 [w / "r"]))
     out.append(("ident duffing --json existing", ident_main, ["duffing", "--quick", "--json", precious], [precious]))
+
     nonempty = w / "report"
     nonempty.mkdir(exist_ok=True)
     (nonempty / "README.md").write_bytes(PRECIOUS)
@@ -150,6 +151,17 @@ def test_no_writing_command_clobbers_anything(world):
     print(f"\nclobbering cases: {len(all_cases)} tried, {len(clobbered)} clobbered")
     assert clobbered == []
     assert refused == len(all_cases) >= 40
+
+
+def test_an_output_under_a_file_is_refused_before_the_analysis(world):
+    # the analysis had run for its minutes, printed its answer, then failed to write: "[Errno 17] File exists"
+    precious = world / "precious.mcap"
+    for argv in (["discover", world / "data.csv", "--report", precious / "x"],
+                 ["fit", world / "rec.mcap", "--json", precious / "x" / "r.json"]):
+        code, out, err, tb = run_main(ident_main, argv)
+        assert code == 2 and tb is None and out == "", (argv, out)
+        assert err.strip() == f"ident {argv[0]}: error: {argv[-2]} {argv[-1]}: {precious} is not a folder", err
+        assert precious.read_bytes() == PRECIOUS
 
 
 def test_force_replaces_an_output_but_never_an_input(world):
@@ -199,6 +211,17 @@ def test_safeio_rules(tmp_path):
         tmp.write_text("whole")
     assert (tmp_path / "new.txt").read_text() == "whole"
     assert oct((tmp_path / "new.txt").stat().st_mode & 0o777) == oct(0o666 & ~_umask())
+    # where an output cannot be written is said before anything is read: a folder under a file, a read-only folder
+    with pytest.raises(ValueError, match=f"--report {a}/x: {a} is not a folder"):
+        check_outputs([Output("--report", a / "x", folder=True)])
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o555)
+    if not os.access(locked, os.W_OK):  # (root may write in it all the same)
+        for out in (Output("--json", locked / "r.json"), Output("--report", locked / "rep", folder=True),
+                    Output("--report", locked, folder=True)):
+            with pytest.raises(ValueError, match=f"cannot write in {locked}"):
+                check_outputs([out])
+    locked.rmdir()
     # a folder: new ones appear whole; into an existing one only the report's files are replaced
     with safe_folder(tmp_path / "rep") as d:
         (d / "README.md").write_text("one")
