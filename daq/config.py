@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 import stat
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -175,6 +175,10 @@ def parse_config(data: object, source: str) -> Config:
     if not isinstance(data, dict):
         raise ValueError(f"{source}: the top level must be a mapping of keys to values")
     data = dict(data)
+    known = [f.name for f in fields(RigConfig)] + ["daq"]
+    unknown = [k for k in data if k not in known]
+    if unknown:  # (said here: the rig's own check would leave "daq" out of what is allowed)
+        raise ValueError(f"{source}: unknown key '{unknown[0]}'; allowed: {', '.join(known)}")
     daq = build(DaqConfig, data.pop("daq", None), source, "daq")
     rig = build(RigConfig, data, source)
     return Config(rig, daq, source)

@@ -6,7 +6,7 @@ list lengths and unknown keys and raises a ValueError naming the source, the key
 allowed. Every number must be finite unless its field says ``inf_ok``. Reading the file is the
 caller's job (the CLIs); :func:`parse_yaml` turns its text into plain data with bounds: no
 aliases or anchors (an alias bomb expands a few hundred bytes into gigabytes), nesting at most
-``MAX_DEPTH`` deep.
+``MAX_DEPTH`` deep, no key given twice in one mapping (YAML would keep the last, silently).
 """
 
 from __future__ import annotations
@@ -40,6 +40,16 @@ class _BoundedLoader(yaml.SafeLoader):
             return super().compose_node(parent, index)
         finally:
             self._depth = depth - 1
+
+    def construct_mapping(self, node, deep=False):  # noqa: D401 - PyYAML API
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if isinstance(key, (str, int, float, bool)) and key in seen:
+                raise yaml.constructor.ConstructorError(None, None, f"key '{key}' given twice (which one was meant?)",
+                                                        key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep)
 
 
 def parse_yaml(text: str, source: str) -> Any:

@@ -169,12 +169,31 @@ def test_own_example_recording_with_its_own_config_says_nothing_found(tmp_path):
     (["--train", "0:6000", "--test", "5000:9000"], "overlap"),
     (["--excitation", "base:pressure"], "kind 'pressure'"),
     (["--response", "tip1", "--response", "nope"], "nope"),
+    # the rig model's shape against the record's (had been numpy's "matmul: Input operand 1 has a mismatch"),
+    # and its drive (a force read as the base's acceleration had run, against a model worse than zero)
+    (["--response", "tip1"], "the rig model has two tips: give their two responses (tip 1's, then tip 2's), got 1"),
+    (["--excitation", "base:force"], "the rig model is driven by its base's acceleration; the excitation 'base' is a "
+                                     "force"),
 ])
 def test_bad_arguments_are_one_line_exit_2(args, match):
     # through main() in this process (the console entry point has subprocess tests of its own)
     code, _, err, tb = run_main(ident_main, ["discover", ROOT / "recordings/linear.mcap", "--model",
                                              ROOT / "recordings/linear.yaml", *args])
     assert tb is None and code == 2 and match in err and len(err.strip().splitlines()) == 1, (code, err, tb)
+
+
+@pytest.mark.parametrize("text,match", [
+    ("rigg:\n  beam1: {gap_pos_m: 0.001}\n", "unknown key 'rigg'; allowed: rig, excitation, sensors, substeps, seed, daq"),
+    ("rig:\n  beam1: {gap_pos_m: 0.001}\n  beam1: {gap_pos_m: 0.002}\n", "key 'beam1' given twice"),
+    ("rig:\n  beam1: {gap_pos_m: -1}\n", "rig.beam1.gap_pos_m = -1.0 is out of range"),
+])
+def test_a_model_file_is_checked_whole_as_daq_checks_a_config(tmp_path, text, match):
+    # a misspelt section had been read as the default rig ("baseline: rig model from the config"), exit 0
+    model = tmp_path / "rig.yaml"
+    model.write_text(text)
+    code, out, err, tb = run_main(ident_main, ["discover", ROOT / "recordings/linear.mcap", "--model", model])
+    assert tb is None and code == 2 and out == "" and len(err.strip().splitlines()) == 1, (code, err, tb)
+    assert f"{model}: " in err and match in err, err
 
 
 def test_nan_that_no_bridge_can_span_is_one_line(tmp_path):

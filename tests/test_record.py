@@ -244,6 +244,8 @@ def test_sigterm_finishes_the_file(tmp_path):
     ("rig: {beam1: {mass_kg: heavy}}", "rig.beam1.mass_kg must be a number"),
     ("rig: {beam1: {mass_kg: nan}}", "rig.beam1.mass_kg must be a number"),
     ("rig: {beam3: {}}", "unknown key 'rig.beam3'"),
+    ("rigg: {beam1: {}}", "unknown key 'rigg'; allowed: rig, excitation, sensors, substeps, seed, daq"),
+    ("daq: {rate_hz: 1000}\ndaq: {rate_hz: 2000}", "key 'daq' given twice"),
     ("daq: {rate_hz: -5}", "daq.rate_hz = -5.0 is out of range"),
     ("rig: [unclosed", "not valid YAML"),
 ])

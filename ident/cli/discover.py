@@ -20,12 +20,11 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 from scipy.signal import welch
-from daq.config import read_yaml_file
+from daq.config import parse_config, read_yaml_file
 from daq.safeio import Output, check_outputs, safe_folder, safe_output
 from replay.formats import format_of, mcap, read_column_matrix
 
 from . import number, parse_split
-from ..config import build
 from ..discovery import Channel, Discovery, Measurement, discover, to_json
 from ..discovery.search import Settings, predict
 from ..discovery.signals import EXCITATIONS, MAX_SAMPLES, RESPONSES, bridged
@@ -67,12 +66,13 @@ def add_parser(sub) -> None:
 
 
 def load_model(path: Path) -> RigParams:
-    """The rig model from a YAML file: its ``rig`` section (a daq config's other sections are the
-    simulated device's and are ignored here)."""
+    """The rig model from a YAML file: a daq config (``daq.config``), checked whole as ``daq record`` checks
+    it, whose ``rig`` section is the model (the defaults where it has none, as the simulated rig has; its
+    other sections are the simulated device's). A misspelt section is refused, not read as the default rig."""
     data = read_yaml_file(path, "model file")
     if not isinstance(data, dict):
         raise ValueError(f"{path}: a rig model file is a mapping with a 'rig' section")
-    return build(RigParams, data.get("rig"), str(path), "rig")
+    return parse_config(data, str(path)).rig.rig
 
 
 def _spec(text: str, kinds: tuple[str, ...], default: str, what: str) -> tuple[str, str]:

@@ -259,6 +259,14 @@ def discover(m: Measurement, *, rig: RigParams | None = None, fit_data: Measurem
     several threads the same record could give another answer (independent seed 73: a cubic with one
     thread, nothing with two); with one, ``ident discover``, the tests and the benchmark's Dask tasks
     agree."""
+    if rig is not None:  # (checked first: the model's matrices had met the record's as numpy's shape error)
+        if len(m.responses) != 2:
+            raise ValueError(f"the rig model has two tips: give their two responses (tip 1's, then tip 2's), got "
+                             f"{len(m.responses)}")
+        if m.excitation.kind != "base_acceleration":
+            raise ValueError(f"the rig model is driven by its base's acceleration; the excitation "
+                             f"{m.excitation.name!r} is a {m.excitation.kind.replace('_', ' ')}: give it as "
+                             "base_acceleration, or leave --model out for a model fitted to the data")
     with threadpool_limits(limits=1, user_api="blas"):
         band0 = preliminary_band(m)
         m, fit_data, input_notes = _undriven_left_out(m, fit_data, band0, keep=rig is not None)
