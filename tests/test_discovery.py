@@ -182,6 +182,23 @@ def test_bad_arguments_are_one_line_exit_2(args, match):
     assert tb is None and code == 2 and match in err and len(err.strip().splitlines()) == 1, (code, err, tb)
 
 
+@pytest.mark.parametrize("spec,match", [
+    (["--excitation", "force", "--response", "x:displacement"],
+     "excitation 'force': no kind given, and its name says force where the default is base acceleration: give "
+     "force:force (or force:base_acceleration)"),
+    (["--excitation", "force:force", "--response", "Displacement [m]"],
+     "response 'Displacement [m]': no kind given, and its name says displacement where the default is acceleration"),
+    (["--excitation", "force:force", "--response", "tip_vel"], "its name says velocity"),
+])
+def test_a_column_named_for_another_kind_than_the_default_needs_its_kind(tmp_path, spec, match):
+    # a "displacement" column read as an acceleration had run to a cubic 2.5e7 times too large, exit 0
+    path = tmp_path / "d.csv"
+    path.write_text("t,force,x,Displacement [m],tip_vel\n" + "".join(f"{i / 1000},0,0,0,0\n" for i in range(100)))
+    code, out, err, tb = run_main(ident_main, ["discover", path, *spec])
+    assert tb is None and code == 2 and out == "" and len(err.strip().splitlines()) == 1, (code, err, tb)
+    assert match in err, err
+
+
 @pytest.mark.parametrize("text,match", [
     ("rigg:\n  beam1: {gap_pos_m: 0.001}\n", "unknown key 'rigg'; allowed: rig, excitation, sensors, substeps, seed, daq"),
     ("rig:\n  beam1: {gap_pos_m: 0.001}\n  beam1: {gap_pos_m: 0.002}\n", "key 'beam1' given twice"),
