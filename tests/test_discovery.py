@@ -174,6 +174,7 @@ def test_own_example_recording_with_its_own_config_says_nothing_found(tmp_path):
     (["--response", "tip1"], "the rig model has two tips: give their two responses (tip 1's, then tip 2's), got 1"),
     (["--excitation", "base:force"], "the rig model is driven by its base's acceleration; the excitation 'base' is a "
                                      "force"),
+    (["--fs", "1000"], "a recording (MCAP) carries its own times"),  # (had been ignored)
 ])
 def test_bad_arguments_are_one_line_exit_2(args, match):
     # through main() in this process (the console entry point has subprocess tests of its own)

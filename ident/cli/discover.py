@@ -22,7 +22,7 @@ import numpy as np
 from scipy.signal import welch
 from daq.config import parse_config, read_yaml_file
 from daq.safeio import Output, check_outputs, safe_folder, safe_output
-from replay.formats import format_of, mcap, read_column_matrix
+from replay.formats import read_column_matrix
 
 from . import number, parse_split
 from ..discovery import Channel, Discovery, Measurement, discover, to_json
@@ -101,8 +101,7 @@ def load_measurement(path: Path, args) -> Measurement:
     cols = [exc[0]] + [c for c, _ in resp]
     # NaN where a value is missing (a recording's lost frames, a table's empty or NaN cells, a time column's
     # holes): bridged here, and the blocks they reach left out by discover as a dropout's
-    time_col, fs_hz = (None, None) if format_of(path) is mcap else (args.time_col, args.fs_hz)  # (its own times)
-    data, fs = read_column_matrix(path, cols, time_col, fs_hz, gaps=True)
+    data, fs = read_column_matrix(path, cols, args.time_col, args.fs_hz, gaps=True)  # (an MCAP's: its own times)
     return bridged(float(fs), Channel(exc[0], exc[1], data[:, 0]),
                    tuple(Channel(c, k, data[:, 1 + i]) for i, (c, k) in enumerate(resp)))
 

@@ -118,6 +118,8 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
             raise ValueError(f"{path}: no time column ({', '.join(TIME_NAMES)}); give --time COL or --fs HZ")
     elif time_col is not None and fs_hz is not None:
         raise ValueError("CSV input needs exactly one of --time COL or --fs HZ")
+    elif fs_hz is not None:
+        _rate_agrees(path, rows[first:first + 1001], header, fs_hz, comma)
     wanted = ([time_col] if time_col else []) + list(columns)
     missing = [c for c in wanted if c not in header]
     if missing:
@@ -148,6 +150,24 @@ def _table(path: Path, columns: list[str], time_col: str | None, fs_hz: float | 
         missing_refused(path, data[:, :1], False, where, "; repair or remove it")
     missing_refused(path, data, gaps, where, "; repair or remove it")
     return data, time_col, first
+
+
+def _rate_agrees(path: Path, rows: list[list[str]], header: list[str], fs_hz: float, comma: bool) -> None:
+    """``--fs`` given where a column is named for time: refused if the column steps at another rate (read as
+    seconds, over its first rows), since one of the two is wrong (a 1 kHz table given --fs 400 had been read
+    at 400 Hz, its modes at 0.4 of theirs)."""
+    col = next((c for c in TIME_NAMES if c in header), None)
+    if col is None or len(rows) < 2:
+        return
+    j = header.index(col)
+    try:
+        step = float(np.median(np.diff([_number(r[j], None, comma) for r in rows])))
+    except (ValueError, IndexError):
+        return  # not a column of numbers: the --fs decides
+    if step > 0 and abs(fs_hz * step - 1) > 0.01:
+        raise ValueError(f"{path}: --fs {fs_hz:g} Hz, but column {col!r} steps at {1 / step:.6g} Hz (read as "
+                         f"seconds): leave --fs out to take the column's times, or, if {col!r} is not in seconds, "
+                         f"rename it ({', '.join(TIME_NAMES)} are taken for time)")
 
 
 def _grid(path: Path, t: np.ndarray, time_col: str, first: int = 1) -> tuple[np.ndarray, float]:
