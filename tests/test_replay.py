@@ -40,10 +40,22 @@ def test_example_recordings_are_small_and_complete():
         assert f.stat().st_size < 2 * 1024 * 1024, f
         rec = read_recording(f, raw=False)
         assert np.all(np.diff(rec.seq) == 1)
+        # in today's layout, a chunk a second: damage costs its second, not the file (the examples of
+        # 2026-11-22 held everything in one chunk, and `replay recover` found none intact after one flipped byte)
+        from mcap.reader import make_reader
+
+        with open(f, "rb") as fh:
+            chunks = len(make_reader(fh).get_summary().chunk_indexes)
+        assert chunks >= int(rec.t_device[-1] - rec.t_device[0]) >= 9, (f, chunks)
+
+
+# a recording from before the compact layout (the example localized-1 as made on 2026-11-22: one chunk, a JSON
+# message per sample beside the serial bytes); the examples are made again in today's layout (``make.sh``)
+BEFORE_COMPACT = Path(__file__).resolve().parent / "data" / "localized-1-before-compact.mcap"
 
 
 def test_fast_raw_path_equals_the_json_samples():
-    f = REC / "localized-1.mcap"
+    f = BEFORE_COMPACT
     s = read_mcap(f)
     rec = read_recording(f, raw=False)
     assert np.array_equal(s.seq, rec.seq)
@@ -59,7 +71,7 @@ def test_old_recordings_json_samples_equal_their_raw_bytes_decoded():
 
     from replay.formats.mcap import decode_raw, scan
 
-    f = REC / "localized-1.mcap"
+    f = BEFORE_COMPACT
     rec = read_recording(f, raw=False)
     assert rec.samples_topic == "/rig/accel"
     with open(f, "rb") as fh:
