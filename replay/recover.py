@@ -3,7 +3,9 @@
 The input is walked with the resynchronising reader (replay.formats.mcap.scan): every record that
 adds up is kept, every chunk whose CRC matches, every schema and channel wherever it was found
 (first chunk, the copies this tool's recorder writes after every chunk, the summary), every
-metadata record and attachment; the damaged regions between them are skipped. A cut (kill -9,
+metadata record and attachment; the damaged regions between them are skipped. A calibration whose
+numbers disagree with the config attached (metadata carry no CRC; the attachment does) is written as the
+config gives it. A cut (kill -9,
 power loss) costs the unfinished chunk, at most the last second; a damaged chunk costs that chunk;
 a damaged header costs nothing. The output is written beside its target and renamed when complete
 (daq.safeio), never over the input (compared by device and inode) and never over an existing file
@@ -27,7 +29,7 @@ from daq.protocol import Decoder
 from daq.recorder import TOPICS
 from daq.safeio import Output, check_outputs, safe_output
 
-from .formats.mcap import Damage, raw_is_frames, scan
+from .formats.mcap import Damage, attached_calibration, raw_is_frames, scan
 
 
 @dataclass
@@ -100,9 +102,12 @@ def recover(src: str | Path, dst: str | Path, force: bool = False) -> RecoverRep
             w.add_message(chan_map[cid], log, data, pub, seq)
             topic = s.channels[cid].topic
             report.messages[topic] = report.messages.get(topic, 0) + 1
+        # a calibration that disagrees with the config attached is taken from the config (``scan``'s check)
+        calibration = (attached_calibration(s) if any(d.what == "calibration metadata" for d in s.damage)
+                       else None)
         for name, m in s.metadata:
             if name != "recovery":
-                w.add_metadata(name, m)
+                w.add_metadata(name, calibration if name == "calibration" and calibration else m)
         for a in s.attachments:
             w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
         w.add_metadata("recovery", {

@@ -197,3 +197,30 @@ def test_the_console_scripts_report_damage_in_one_line(original):
         assert p.returncode == 2 and "Traceback" not in p.stderr
         (line,) = p.stderr.strip().splitlines()
         assert f"chunk at byte {chunks[5][0]} unreadable" in line and "run replay recover" in line
+
+
+def test_a_changed_digit_in_the_calibration_is_damage_and_recover_takes_the_attached_config(original):
+    # metadata records carry no CRC: one digit of tip 1's scale changed (0.0048828125 -> 0.0098828125) had
+    # exported tip 1 19 x too large, exit 0, and `replay recover` had called the file whole. The config the
+    # recorder attached (an attachment, CRC-checked) gives the scale the counts were recorded under.
+    folder, path, _ = original
+    data = bytearray(path.read_bytes())
+    key = data.find(b"tip1.scale_m_per_s2_per_count")
+    at = data.find(b"0.0048828125", key)
+    assert key > 0 and 0 < at - key < 40  # the metadata's value, as its map writes it after the key
+    data[at + 4] = ord("9")
+    bad = folder / "calibration.mcap"
+    bad.write_bytes(bytes(data))
+    for args in (["info", bad], ["export", bad, "--csv", folder / "calibration.csv"], [bad, "--max", "--no-identify",
+                                                                                       "--viewer", "none"]):
+        code, out, err, tb = run_main(replay_main, args)
+        assert tb is None and code == 2 and len(err.strip().splitlines()) == 1, (args, err)
+        assert ("calibration metadata at byte" in err and "tip1.scale_m_per_s2_per_count = 0.0098828125 where the "
+                "config attached (CRC-checked) gives 0.0048828125" in err and "run replay recover" in err), err
+    assert not (folder / "calibration.csv").exists()
+    fixed = folder / "calibration-fixed.mcap"
+    code, out, err, tb = run_main(replay_main, ["recover", bad, "-o", fixed])
+    assert code == 0 and tb is None, err
+    names = ["base", "tip1", "tip2"]
+    want, got = read_columns(path, names).matrix(names), read_columns(fixed, names).matrix(names)
+    assert got.shape == want.shape and (got == want).all()

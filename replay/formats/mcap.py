@@ -35,11 +35,13 @@ from pathlib import Path
 import numpy as np
 import zstandard
 
-from daq.config import Config, DaqConfig
+from daq.config import Config, DaqConfig, parse_config
 from daq.driver import SampleBlock
 from daq.protocol import FLAG_CLIPPED, Decoder
 from daq.recorder import RAW_LINES, TOPICS, McapRecorder
 from daq.sim.rig import RigConfig
+
+from ident.config import parse_yaml
 
 from .base import Columns, Samples, on_grid
 
@@ -103,6 +105,8 @@ class Damage:
             return f"cut short at byte {self.offset} ({self.reason})"
         if self.what == "bytes":
             return f"bytes {self.offset}-{self.end - 1} unreadable ({self.reason})"
+        if self.what == "calibration metadata":
+            return f"calibration metadata at byte {self.offset} damaged ({self.reason})"
         return f"{self.what} at byte {self.offset} unreadable ({self.reason})"
 
 
@@ -125,6 +129,7 @@ class Scan:
     schemas: dict[int, SchemaRec] = field(default_factory=dict)
     channels: dict[int, ChannelRec] = field(default_factory=dict)
     metadata: list[tuple[str, dict]] = field(default_factory=list)  # in file order
+    metadata_at: list[tuple[int, int]] = field(default_factory=list)  # each one's bytes [a, b) in the file
     attachments: list[AttachmentRec] = field(default_factory=list)
     chunks: list[_ChunkLoc] = field(default_factory=list)  # intact chunks, in file order
     loose: list[int] = field(default_factory=list)  # offsets of messages outside chunks
@@ -504,6 +509,7 @@ class _Walker:
             s.chunks.append(loc)
         elif op == METADATA:
             s.metadata.append(parsed)
+            s.metadata_at.append((pos, end))
         elif op == ATTACHMENT:
             s.attachments.append(parsed)
 
@@ -524,7 +530,45 @@ def scan(path: str | Path) -> Scan:
     _Walker(buf, size, s).walk()
     if not s.channels and not s.chunks and not s.metadata and not s.loose:
         raise ValueError(f"{path}: no MCAP records found (not an MCAP file, or cut before its first record)")
+    _check_calibration(s)
     return s
+
+
+CALIBRATED = (".scale_m_per_s2_per_count", ".offset_m_per_s2")  # the calibration metadata's numbers
+
+
+def attached_calibration(s: Scan) -> dict[str, str] | None:
+    """The calibration metadata the recorder derives from the config it attached (``config.yaml``, an attachment
+    whose CRC the walk checks), or None where there is no such attachment or it is not a config of this tool."""
+    att = next((a for a in s.attachments if a.name == "config.yaml"), None)
+    if att is None:
+        return None
+    try:
+        return parse_config(parse_yaml(bytes(att.data).decode("utf-8"), "config.yaml"), "config.yaml").calibration_metadata()
+    except (ValueError, UnicodeDecodeError):  # (an older recording's config: nothing to check against)
+        return None
+
+
+def _check_calibration(s: Scan) -> None:
+    """Metadata records carry no CRC of their own: the calibration's scales and offsets, which turn every count
+    into m/s^2, are checked against those of the attached config, and a difference is damage (one changed digit
+    had exported tip 1 19 x too large, exit 0, and ``replay recover`` had called the file whole)."""
+    found = [(i, m) for i, (name, m) in enumerate(s.metadata) if name == "calibration"]
+    want = attached_calibration(s) if found else None
+    if not want:
+        return
+    i, cal = found[-1]
+    for key, value in want.items():
+        if key.endswith(CALIBRATED) and key in cal:
+            try:
+                same = float(cal[key]) == float(value)
+            except ValueError:
+                same = False
+            if not same:
+                a, b = s.metadata_at[i]
+                s.damage.append(Damage(a, b, "calibration metadata",
+                                       f"{key} = {cal[key]} where the config attached (CRC-checked) gives {value}"))
+                return
 
 
 def open_intact(path: str | Path) -> Scan:
