@@ -185,7 +185,9 @@ def _grid(path: Path, t: np.ndarray, time_col: str, first: int = 1) -> tuple[np.
             raise ValueError(f"{path}: column {time_col!r} is not uniformly sampled (steps from "
                              f"{dt.min():.3g} to {dt.max():.3g} s); resample first or give --fs")
         return np.arange(t.size), check_rate(1.0 / step, "the time column's rate")
-    return np.concatenate([[0], np.cumsum(np.rint(k).astype(np.int64))]), check_rate(1.0 / med, "the time column's rate")
+    index = np.concatenate([[0], np.cumsum(np.rint(k).astype(np.int64))])
+    # the rate over the whole column (stamps rounded to fewer digits than the step: the median is a digit off)
+    return index, check_rate(float(index[-1]) / float(t[-1] - t[0]), "the time column's rate")
 
 
 ROUNDED = 0.1  # of a step: how far a stamp may lie from the straight line through all of them

@@ -43,7 +43,7 @@ from daq.sim.rig import RigConfig
 
 from ident.config import parse_yaml
 
-from .base import Columns, Samples, on_grid
+from .base import Columns, Samples, on_grid, typical_step
 
 try:  # the mcap package's own dependency for lz4 chunks
     import lz4.frame as _lz4
@@ -608,7 +608,7 @@ class Recording:
         """From the device clock within sessions; NaN with fewer than two samples."""
         d = np.diff(self.t_device)
         d = d[(d > 0) & (np.diff(self.seq) == 1)] if d.size else d
-        return float(1.0 / np.median(d)) if d.size else float("nan")
+        return 1.0 / typical_step(d) if d.size else float("nan")
 
     @property
     def duration_s(self) -> float:
@@ -744,7 +744,7 @@ def decode_raw(s: Scan, raws: list[tuple[bytes, int]], events: list[dict]) -> Ra
         seq, t_us, counts, flags, cuts, end = seq[:k], t_us[:k], counts[:k], flags[:k], cuts[:k], end[:k]
     n = seq.size
     dt = np.diff(t_us.astype(np.float64))[(np.diff(seq) == 1) & ~cuts[1:]] if n > 1 else np.zeros(0)
-    fs = 1e6 / float(np.median(dt)) if dt.size and np.median(dt) > 0 else float("nan")
+    fs = 1e6 / typical_step(dt) if dt.size and np.median(dt) > 0 else float("nan")
     # the timeline, as the driver computes it: device time plus an offset per session
     t_dev = t_us.astype(np.float64) * 1e-6
     t_s = np.empty(n)
@@ -830,7 +830,7 @@ def read_samples(path: str | Path, *, fill: bool = True, **unused) -> Samples:
         d = d[d > 0]
         if not d.size:
             raise ValueError(f"{path}: the samples' times do not advance")
-        fs = 1e9 / float(np.median(d))
+        fs = 1e9 / typical_step(d)
         index = np.rint((rec.log_time_ns - rec.log_time_ns[0]) * (fs * 1e-9)).astype(np.int64)
         if np.any(np.diff(index) <= 0):
             index = np.arange(len(rec.seq))

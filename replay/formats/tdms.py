@@ -24,7 +24,7 @@ from nptdms import ChannelObject, GroupObject, RootObject, TdmsFile, TdmsWriter
 
 from daq.safeio import safe_output
 
-from .base import Columns, Samples, check_rate, even_grid, missing_refused
+from .base import Columns, Samples, check_rate, even_grid, missing_refused, typical_step
 from .uff import CHANNELS, unit_factor
 
 SUFFIXES = (".tdms",)
@@ -96,7 +96,7 @@ def read_columns(path: str | Path, names: list[str], time_col: str | None = None
         if t.size < 2 or not np.all(np.isfinite(t)) or np.any(dt <= 0) or \
                 np.max(np.abs(dt / np.median(dt) - 1)) > 0.01:
             raise ValueError(f"{path}: channel {time_col!r} is not a uniform, increasing time in seconds")
-        fs = check_rate(1.0 / float(np.median(dt)), f"channel {time_col!r}'s rate")
+        fs = check_rate(1.0 / typical_step(dt), f"channel {time_col!r}'s rate")
     else:
         incs = {chans[c]["increment"] for c in names}
         if None in incs:
