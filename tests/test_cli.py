@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from clitools import run_main
@@ -60,3 +61,14 @@ def test_value_errors_are_one_line_and_exit_2(tmp_path):
     proc = run("duffing", "--quick", "--no-progress", "--report", str(tmp_path / "afile"))
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly():
+    # `replay info F | head -3`: the pipe closed before the output was written had printed
+    # "replay info: error: [Errno 32] Broken pipe" (or Python's "Exception ignored" at exit)
+    rec = Path(__file__).resolve().parents[1] / "recordings" / "linear.mcap"
+    p = subprocess.Popen([sys.executable, "-m", "replay", "info", str(rec)], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 141 and err == "", err

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from collections.abc import Callable
 from importlib.metadata import PackageNotFoundError, version
@@ -40,7 +41,15 @@ class OneLineParser(argparse.ArgumentParser):
 def run_guarded(prog: str, func: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
     """Run a command; bad input is one line on stderr and exit code 2, never a traceback."""
     try:
-        return func(args)
+        code = func(args)
+        sys.stdout.flush()  # (a pipe's reader gone is found here, not in the interpreter's exit)
+        return code
+    except BrokenPipeError:  # what reads the output went away (`replay info F | head -3`): no more to say
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # (so the exit's flush is quiet)
+        except (OSError, ValueError, AttributeError):
+            pass
+        return 141  # (as a command killed by SIGPIPE: 128 + 13)
     except (ValueError, OSError) as exc:
         text = " ".join(str(exc).split()) or type(exc).__name__
         print(f"{prog}: error: {text}", file=sys.stderr)
