@@ -194,10 +194,12 @@ def read_yaml_file(path: str | Path, what: str = "config file", max_bytes: int =
         raise ValueError(f"{p}: {what} not found") from None
     except OSError as exc:
         raise ValueError(f"{p}: cannot read {what}: {exc.strerror}") from None
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode):  # (before fdopen: a folder's descriptor there is "[Errno 21] ...: 3")
+        os.close(fd)
+        raise ValueError(f"{p}: {'a folder' if stat.S_ISDIR(st.st_mode) else 'not a regular file'}; "
+                         f"give a YAML {what}")
     with os.fdopen(fd, "rb") as fh:
-        st = os.fstat(fh.fileno())
-        if not stat.S_ISREG(st.st_mode):
-            raise ValueError(f"{p}: not a regular file; give a YAML {what}")
         if st.st_size > max_bytes:
             raise ValueError(f"{p}: {st.st_size} bytes; a {what} may hold at most {max_bytes} bytes")
         raw = fh.read(max_bytes + 1)

@@ -269,4 +269,6 @@ class PartFile:
 def part_path(path: str | Path) -> Path:
     """Where a streamed output lives until it is complete: ``NAME.part``."""
     p = Path(path)
+    if not p.name or p.is_dir():  # (".", "..", "/", a folder: pathlib's "PosixPath('.') has an empty name")
+        raise ValueError(f"{path} is a folder; give a file name")
     return p.with_name(p.name + ".part")

@@ -17,7 +17,7 @@ from daq.sim.independent.draws import equivalents
 from oscillator import linear_under_random_force, two_masses_pushed
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery.backbone import CLEAR, free_decay
-from ident.discovery.discover import (_fit_modal, _input_clipped, _said, _settle_by_backbone, _softening_look_alike,
+from ident.discovery.discover import (_fit_modal, _input_clipped, _split, _said, _settle_by_backbone, _softening_look_alike,
                                      _undriven_left_out, _warm, noise_floor, sum_notes)
 from ident.discovery.baselines.modal import (Columns, ModalBaseline, _design, drivable, fit_model, peak_poles,
                                              underlying_poles)
@@ -1389,3 +1389,15 @@ def test_the_warm_up_before_a_block_ignores_a_pole_below_the_band():
     assert _warm(base(0.19, 12.0), prep) == max(prep.edge, int(3.0 / 4.8 * fs)) == 625
     in_band = base(6.0, 12.0)
     assert _warm(in_band, prep) == int(3.0 / in_band.model.frequencies_hz.min() * fs) in (499, 500)
+
+
+def test_a_train_or_test_slice_given_alone_is_paired_with_the_longer_stretch_beside_it():
+    # --test 0:5000 alone had been paired with a default train of the first 60 % and refused as overlapping
+    # a "--train 0:12000" the user never gave
+    prep = SimpleNamespace(n=20000, edge=100)  # (the two fields the given slices are cut by)
+    s = _split(prep, test=slice(0, 5000))
+    assert list(s.train) == [slice(5000, 19900)] and s.test[0].start == 100 and s.test[-1].stop == 5000
+    s = _split(prep, train=slice(12000, 20000))
+    assert list(s.train) == [slice(12000, 19900)] and s.test[0].start == 100 and s.test[-1].stop == 12000
+    s = _split(prep, train=slice(0, 12000))  # the usual: the rest after it
+    assert s.test[0].start == 12000 and s.test[-1].stop == 19900

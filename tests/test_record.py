@@ -292,3 +292,14 @@ def test_clock_estimator_holds_its_drift_when_a_busy_host_reads_late():
     assert offset == pytest.approx(2.0, abs=1e-4)
     slope = np.polyfit(t_dev, host, 1)[0]  # least squares: what the estimator used to say
     assert abs((slope - 1) * 1e6 - expected) > 500
+
+
+@pytest.mark.parametrize("which", ["-o", "--config"])
+def test_a_folder_where_a_file_belongs_is_named_as_one(tmp_path, which):
+    # -o . had said "PosixPath('.') has an empty name", --config DIR "[Errno 21] Is a directory: 3"
+    argv = ["record", "--sim", "--duration", "1"]
+    argv += ["-o", "."] if which == "-o" else ["--config", tmp_path, "-o", tmp_path / "x.mcap"]
+    code, _, err, tb = run_main(daq_main, argv)
+    want = f"{tmp_path}: a folder; give a YAML config file" if which == "--config" else ". is a folder; give a file name"
+    assert tb is None and code == 2 and err.strip() == f"daq record: error: {want}", err
+    assert list(tmp_path.iterdir()) == []

@@ -234,9 +234,11 @@ def _split(prep: Prepared, train: slice | None = None, test: slice | None = None
     record equal in the motion's energy (``split.by_energy``)."""
     if train is not None or test is not None:
         n = prep.n
-        tr = train or slice(0, int(0.6 * n))
-        te = test or slice(tr.stop, n)
-        return given(n, prep.edge, tr, te)
+        # one of the two given: the other is the longer stretch of the record on either side of it (a default
+        # first 60 % had overlapped a --test given at the start, and the refusal named a --train never given)
+        one = train or test
+        rest = max((slice(0, one.start), slice(one.stop, n)), key=lambda s: s.stop - s.start)
+        return given(n, prep.edge, train or rest, test or rest)
     block_s = BLOCK_PERIODS * 0.4 / float(prep.band[0])
     min_block = max(int(block_s * prep.fs_hz), 16)
     if prep.transient:  # a hammer hit: blocks of equal shares of the motion, not of time
