@@ -54,8 +54,10 @@ def add_parser(sub) -> None:
     p.add_argument("--fs", type=float, dest="fs_hz", help="CSV: sampling rate [Hz]")
     p.add_argument("--fit-data", type=Path, help="fit the modal baseline on this file (same columns, e.g. a "
                                                    "low-level test); causes must then hold there too")
-    p.add_argument("--train", help="training samples START:STOP (default: interleaved blocks, 60 %%)")
-    p.add_argument("--test", help="held-out samples START:STOP (default: every 5th block's 3rd and 5th, 40 %%)")
+    p.add_argument("--train", help="training samples START:STOP (default: interleaved blocks, 60 %%; with --test "
+                                   "alone, the longer stretch beside it)")
+    p.add_argument("--test", help="held-out samples START:STOP (default: every 5th block's 3rd and 5th, 40 %%; with "
+                                  "--train alone, the longer stretch beside it)")
     p.add_argument("--max-samples", type=number(1000, integer=True), default=MAX_SAMPLES,
                    help="samples x responses analysed at most; a longer record is decimated to the band's needs, then "
                         f"cut to the span with the widest range of amplitudes (default {MAX_SAMPLES:,}, about 3.5 GB)")
