@@ -340,9 +340,10 @@ def _gaps(m: Measurement, band: tuple[float, float], notes: list[str], what: str
     brief = [g for g in m.lost if g.stop_s - g.start_s < short]
     if brief:
         longest = max(g.stop_s - g.start_s for g in brief)
-        notes.append(f"{what}{len(brief)} short run{'s' if len(brief) > 1 else ''} of missing samples bridged by "
-                     f"interpolation (the longest {1e3 * longest:.3g} ms, under a tenth of a period of the band's "
-                     f"top, {band[1]:.3g} Hz) and analysed")
+        runs = len({(g.start_s, g.stop_s) for g in brief})  # (a row missing in several channels is one run)
+        notes.append(f"{what}{runs} short run{'s' if runs > 1 else ''} of missing samples bridged by "
+                     f"interpolation (the longest {1e3 * longest:.3g} ms, under a tenth of a period at "
+                     f"{band[1]:.3g} Hz, the top of the band first estimated from the record) and analysed")
     return [g for g in m.lost if g.stop_s - g.start_s >= short] + dropouts(m, band)
 
 
