@@ -198,6 +198,8 @@ def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | No
             opened: threading.Event) -> int:
     last_status = [time.monotonic()]
 
+    status_shown = [False]  # a status line ends with \r, not \n: what follows it starts a line of its own
+
     def on_block(b):
         rec.write_block(b)
         if live is not None:
@@ -209,6 +211,7 @@ def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | No
             st = acq.status()
             rec.write_status(st)
             if not args.quiet:
+                status_shown[0] = True
                 print(f"\r{st['samples']:9d} samples  {st['dropped_frames']} dropped  {st['crc_errors']} crc  "
                       f"{st['reconnects']} reconnects  {st['restarts']} restarts", end="", file=sys.stderr, flush=True)
 
@@ -223,17 +226,23 @@ def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | No
     acq.on_status = rec.write_device
     _on_signals(acq.stop)
     try:
-        acq.run(args.duration, opened=opened)
-    finally:
-        if live is not None:
-            live.close()
-            live.write_to(rec)
-        rec.write_status(acq.status())
-        rec.close()
+        try:
+            acq.run(args.duration, opened=opened)
+        finally:
+            if status_shown[0]:  # (a disk-full error had been printed on the status line's end)
+                print(file=sys.stderr)
+            if live is not None:
+                live.close()
+                live.write_to(rec)
+            rec.write_status(acq.status())
+            rec.close()
+    except OSError as exc:  # the disk full, a file-size limit, the medium gone: say where the samples are
+        part = part_path(out)
+        kept = (f"what came before is in {part}: recover it with `replay recover {part} -o {out}`"
+                if part.exists() else f"what came before is in {out}" if out.exists() else "nothing was kept")
+        raise ValueError(f"recording stopped: {exc.strerror or exc}; {kept}") from None
     st = acq.status()
     size = out.stat().st_size
-    if not args.quiet:
-        print(file=sys.stderr)
     per = size / st["samples"] if st["samples"] else float("nan")
     link = (f"{st['malformed_lines']} malformed lines" if "malformed_lines" in st else f"{st['crc_errors']} CRC errors")
     print(f"{out}: {st['samples']} samples, {st['dropped_frames']} dropped, {st['duplicates']} duplicates, "

@@ -303,3 +303,27 @@ def test_a_folder_where_a_file_belongs_is_named_as_one(tmp_path, which):
     want = f"{tmp_path}: a folder; give a YAML config file" if which == "--config" else ". is a folder; give a file name"
     assert tb is None and code == 2 and err.strip() == f"daq record: error: {want}", err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_stops_the_recording_in_one_line_that_says_where_the_samples_are(tmp_path):
+    # a file-size limit stands in for a full disk (both are a write's OSError): the error had followed the status
+    # line on its own line's end ("restartsdaq record: error: [Errno 27] File too large"), naming no file
+    import resource
+
+    def limited():
+        # about 13 s of a 2 kHz recording; twice the largest file numba's cache writes when it compiles (274 kB)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (600_000, 600_000))
+
+    out = tmp_path / "full.mcap"
+    p = subprocess.run([sys.executable, "-m", "daq", "record", "--port", "rig://?seed=4", "--duration", "60", "-o",
+                        str(out), "--no-identify"], preexec_fn=limited, capture_output=True, timeout=300, cwd=tmp_path)
+    err = p.stderr.decode()
+    assert p.returncode == 2 and "Traceback" not in err, err
+    last = err.rstrip("\n").split("\n")[-1]  # (status lines end in \r; the error starts a line of its own)
+    part = tmp_path / "full.mcap.part"
+    assert last == (f"daq record: error: recording stopped: File too large; what came before is in {part}: recover "
+                    f"it with `replay recover {part} -o {out}`"), err
+    fixed = tmp_path / "fixed.mcap"
+    assert subprocess.run([sys.executable, "-m", "replay", "recover", str(part), "-o", str(fixed)],
+                          capture_output=True, timeout=120).returncode == 0
+    assert len(read_recording(fixed).seq) > 10 * 2000  # the seconds before the limit
