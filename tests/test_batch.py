@@ -87,7 +87,7 @@ def test_a_failing_file_is_a_row_and_a_rerun_analyses_only_what_is_not_done(tmp_
     out = tmp_path / "results.csv"
     argv = ["batch", camp, "--regimes", "--workers", "0", "--no-progress", "-o", out]
     code, stdout, err, tb = run_main(ident_main, argv)
-    assert code == 0 and tb is None, err
+    assert code == 1 and tb is None, err  # finished, with rows in error: 1 (it had been 0, as if all were well)
     rows = {Path(r["file"]).name: r for r in table(out)}
     assert sorted(rows) == ["a.mcap", "b-cut.mcap", "c.csv"]
     assert rows["a.mcap"]["error"] == "" and rows["a.mcap"]["regimes"]
@@ -96,13 +96,13 @@ def test_a_failing_file_is_a_row_and_a_rerun_analyses_only_what_is_not_done(tmp_
     assert "3 rows in" in stdout and "1 without error, 2 with an error" in stdout
 
     code, stdout, err, _ = run_main(ident_main, argv)  # again: the good row is kept, the failed ones tried again
-    assert code == 0 and "3 recordings, 1 already in" in stdout and "2 to analyse" in stdout
+    assert code == 1 and "3 recordings, 1 already in" in stdout and "2 to analyse" in stdout
     again = {Path(r["file"]).name: r for r in table(out)}
     assert again["a.mcap"] == rows["a.mcap"]  # not run again: even its run time is the first run's
 
     os.utime(good, ns=(good.stat().st_atime_ns, good.stat().st_mtime_ns + 10**9))  # the file changed
     code, stdout, err, _ = run_main(ident_main, argv)
-    assert code == 0 and "0 already in" in stdout
+    assert code == 1 and "0 already in" in stdout
 
 
 def test_interrupt_keeps_the_finished_rows_and_a_rerun_completes(tmp_path, monkeypatch):

@@ -406,7 +406,7 @@ def run(args) -> int:
         with safe_folder(args.report, inputs=p.inputs + [args.output], force=args.force) as folder:
             write_report(rows, folder, args.output)
         print(f"report: {args.report / 'README.md'}")
-    return 0
+    return 1 if any(r["error"] for r in rows) else 0  # (finished, but not every row: a script should know)
 
 
 def summary(rows: list[dict], path: Path) -> str:
