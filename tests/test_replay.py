@@ -359,6 +359,9 @@ def test_a_comma_table_keeps_its_commas_and_a_preamble_naming_the_channels_is_no
     ("t,base,tip1,tip2\n0,1,2,3\n0.1,1,2,3\n0.5,1,2,3\n", ["--time", "t"], "not uniformly sampled"),
     ("base,tip1,tip2\n1,2,3\n1,2,3\n", [], "no time column (t, time, time_s, t_s); give --time COL or --fs HZ"),
     ("t,base,tip1,tip2\n0,1,2,3\n0.1,1,2,3\n", ["--time", "t", "--fs", "10"], "exactly one of --time COL or --fs"),
+    # a time column in milliseconds or sample numbers (it had been read at 1 Hz, and refused later for other reasons)
+    ("time_ms,base,tip1,tip2\n0,1,2,3\n1,1,2,3\n2,1,2,3\n", ["--time", "time_ms"],
+     "column 'time_ms' counts in whole steps of 1 (sample numbers, or milliseconds?), which would be 1 Hz in seconds"),
     # a rate given against the table's own time column (it had been read at 400 Hz, silently)
     ("t,base,tip1,tip2\n0,1,2,3\n0.001,1,2,3\n0.002,1,2,3\n", ["--fs", "400"],
      "--fs 400 Hz, but column 't' steps at 1000 Hz (read as seconds): leave --fs out"),

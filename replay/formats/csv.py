@@ -178,6 +178,10 @@ def _grid(path: Path, t: np.ndarray, time_col: str, first: int = 1) -> tuple[np.
         raise ValueError(f"{path}: column {time_col!r} is not strictly increasing "
                          f"(line {int(np.argmax(dt <= 0)) + first + 2})")
     med = float(np.median(dt))
+    if med >= 1.0 and np.all(t == np.rint(t)):  # whole numbers a second or more apart: not seconds
+        raise ValueError(f"{path}: column {time_col!r} counts in whole steps of {med:g} (sample numbers, or "
+                         f"milliseconds?), which would be {1 / med:g} Hz in seconds: give the rate with --fs HZ "
+                         f"instead, or a time column in seconds")
     k = dt / med
     if np.max(np.abs(k - np.rint(k))) > 0.01:
         step = _rounded_step(t)
