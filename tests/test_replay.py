@@ -333,7 +333,7 @@ def test_a_comma_table_keeps_its_commas_and_a_preamble_naming_the_channels_is_no
     got = read_csv(notes, time_col="t")
     np.testing.assert_array_equal(got.values[:, 0], [1.0, 1.5, 2.0])
     late = tmp_path / "late.csv"
-    late.write_text("t;base;tip1;tip2\n0;0;0;0\n1;0;0;0\n2;0,52;1,5;2,5\n")
+    late.write_text("t;base;tip1;tip2\n0;0;0;0\n0,001;0;0;0\n0,002;0,52;1,5;2,5\n")
     np.testing.assert_array_equal(read_csv(late, time_col="t").values[2], [0.52, 1.5, 2.5])
     one = tmp_path / "one.csv"
     one.write_text("x\n0,1429\n-2,5\n")
