@@ -238,7 +238,8 @@ def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | No
             rec.close()
     except OSError as exc:  # the disk full, a file-size limit, the medium gone: say where the samples are
         part = part_path(out)
-        kept = (f"what came before is in {part}: recover it with `replay recover {part} -o {out}`"
+        to = out.with_name(f"{out.stem}-recovered{out.suffix}") if out.exists() else out  # (appeared meanwhile)
+        kept = (f"what came before is in {part}: recover it with `replay recover {part} -o {to}`"
                 if part.exists() else f"what came before is in {out}" if out.exists() else "nothing was kept")
         raise ValueError(f"recording stopped: {exc.strerror or exc}; {kept}") from None
     st = acq.status()

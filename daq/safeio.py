@@ -100,15 +100,17 @@ def check_outputs(outputs: Sequence[Output], inputs: Iterable[str | Path | None]
                                  f"`replay recover {p} -o FIXED.mcap` or remove it")
             if not force:
                 raise ValueError(f"{_describe(o)} exists; give --force to replace it")
-        # where it will be written (the folder itself, or the nearest existing folder above it, where the
-        # missing ones are made): checked now, not after an analysis of minutes
-        parent = p if o.folder and p.is_dir() else p.parent
+        # where it will be written (the nearest existing folder above it, where the missing ones are made and
+        # the file or folder is made beside and renamed; an existing folder's files are replaced in it too):
+        # checked now, not after an analysis of minutes
+        parent = p.parent
         while not parent.exists() and parent != parent.parent:
             parent = parent.parent
         if not parent.is_dir():
             raise ValueError(f"{_describe(o)}: {parent} is not a folder")
-        if not os.access(parent, os.W_OK | os.X_OK):
-            raise ValueError(f"{_describe(o)}: cannot write in {parent} (read-only, or not yours)")
+        for where in (parent, p) if o.folder and p.is_dir() else (parent,):
+            if not os.access(where, os.W_OK | os.X_OK):
+                raise ValueError(f"{_describe(o)}: cannot write in {where} (read-only, or not yours)")
     for k, a in enumerate(outs):
         for b in outs[k + 1:]:
             if same_file(a.path, b.path):

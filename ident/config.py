@@ -45,10 +45,11 @@ class _BoundedLoader(yaml.SafeLoader):
         seen = set()
         for key_node, _ in node.value:
             key = self.construct_object(key_node, deep=True)
-            if isinstance(key, (str, int, float, bool)) and key in seen:
-                raise yaml.constructor.ConstructorError(None, None, f"key '{key}' given twice (which one was meant?)",
-                                                        key_node.start_mark)
-            seen.add(key)
+            if isinstance(key, (str, int, float, bool)):  # (an unhashable key is PyYAML's own error below)
+                if key in seen:
+                    raise yaml.constructor.ConstructorError(None, None, f"key '{key}' given twice (which one was "
+                                                            "meant?)", key_node.start_mark)
+                seen.add(key)
         return super().construct_mapping(node, deep)
 
 

@@ -52,10 +52,8 @@ def _csv_options(p) -> None:
 
 def _read_options(args) -> dict:
     """Reading options for the input's format (CSV/MAT columns and times; a recording takes none)."""
-    if formats.format_of(args.file) is formats.mcap:
-        if args.time_col is not None or args.fs_hz is not None:
-            raise ValueError("--time and --fs are for CSV and MAT files; a recording carries its own times")
-        return {}
+    if formats.format_of(args.file) is formats.mcap:  # (its reader refuses a time column or a rate: its own times)
+        return {"time_col": args.time_col, "fs_hz": args.fs_hz}
     return {"time_col": args.time_col, "fs_hz": args.fs_hz, "base": args.base, "tip1": args.tip1, "tip2": args.tip2}
 
 

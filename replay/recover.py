@@ -108,6 +108,8 @@ def recover(src: str | Path, dst: str | Path, force: bool = False) -> RecoverRep
         for name, m in s.metadata:
             if name != "recovery":
                 w.add_metadata(name, calibration if name == "calibration" and calibration else m)
+        if calibration and not any(name == "calibration" for name, _ in s.metadata):  # (its name was damaged)
+            w.add_metadata("calibration", calibration)
         for a in s.attachments:
             w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
         w.add_metadata("recovery", {

@@ -72,3 +72,14 @@ def test_a_reader_that_goes_away_ends_the_command_quietly():
     p.stdout.close()
     err = p.stderr.read().decode()
     assert p.wait(timeout=120) == 141 and err == "", err
+
+
+def test_a_broken_pipe_that_is_not_the_output_is_an_error_as_any_other(capsys):
+    # (a port or a child's pipe that breaks is no reader gone: one line and exit 2, not a silent 141)
+    from ident.cli import run_guarded
+
+    def breaks(_):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    assert run_guarded("ident x", breaks, None) == 2
+    assert capsys.readouterr().err == "ident x: error: [Errno 32] Broken pipe\n"

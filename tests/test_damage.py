@@ -224,3 +224,18 @@ def test_a_changed_digit_in_the_calibration_is_damage_and_recover_takes_the_atta
     names = ["base", "tip1", "tip2"]
     want, got = read_columns(path, names).matrix(names), read_columns(fixed, names).matrix(names)
     assert got.shape == want.shape and (got == want).all()
+    # one changed byte in a key or in the record's name: it had read as no samples at all, and recover as whole
+    for what, old, new, said in (("key", b"tip1.scale_m_per_s2_per_count", b"tiX1.scale_m_per_s2_per_count",
+                                  "no tip1.scale_m_per_s2_per_count where the config attached"),
+                                 ("name", b"\x0b\x00\x00\x00calibration", b"\x0b\x00\x00\x00calibratiXn",
+                                  "calibration metadata damaged (no record of it")):
+        data = path.read_bytes()
+        assert data.count(old) >= 1, what  # (the first: the record itself; the name again in the summary's index)
+        bad = folder / f"calibration-{what}.mcap"
+        bad.write_bytes(data.replace(old, new, 1))
+        code, out, err, tb = run_main(replay_main, ["info", bad])
+        assert tb is None and code == 2 and said in err and "run replay recover" in err, (what, err)
+        fixed = folder / f"calibration-{what}-fixed.mcap"
+        assert run_main(replay_main, ["recover", bad, "-o", fixed])[0] == 0
+        got = read_columns(fixed, names).matrix(names)
+        assert got.shape == want.shape and (got == want).all(), what

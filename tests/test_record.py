@@ -246,6 +246,7 @@ def test_sigterm_finishes_the_file(tmp_path):
     ("rig: {beam3: {}}", "unknown key 'rig.beam3'"),
     ("rigg: {beam1: {}}", "unknown key 'rigg'; allowed: rig, excitation, sensors, substeps, seed, daq"),
     ("daq: {rate_hz: 1000}\ndaq: {rate_hz: 2000}", "key 'daq' given twice"),
+    ("? [a, b]\n: 1\n", "not valid YAML"),  # an unhashable key (the duplicate check had raised a TypeError)
     ("daq: {rate_hz: -5}", "daq.rate_hz = -5.0 is out of range"),
     ("rig: [unclosed", "not valid YAML"),
 ])

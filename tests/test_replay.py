@@ -362,7 +362,8 @@ def test_a_comma_table_keeps_its_commas_and_a_preamble_naming_the_channels_is_no
     # a time column in milliseconds or sample numbers (it had been read at 1 Hz, and refused later for other reasons)
     ("time_ms,base,tip1,tip2\n0,1,2,3\n1,1,2,3\n2,1,2,3\n", ["--time", "time_ms"],
      "column 'time_ms' counts in whole steps of 1 (sample numbers, or milliseconds?), which would be 1 Hz in seconds"),
-    # a rate given against the table's own time column (it had been read at 400 Hz, silently)
+    # a rate given against the table's own time column (it had been read at 400 Hz, silently); a column of
+    # sample numbers with the rate given is read at that rate (test_replay's rate test below)
     ("t,base,tip1,tip2\n0,1,2,3\n0.001,1,2,3\n0.002,1,2,3\n", ["--fs", "400"],
      "--fs 400 Hz, but column 't' steps at 1000 Hz (read as seconds): leave --fs out"),
 ])
@@ -451,5 +452,12 @@ def test_a_rate_whose_step_is_no_whole_tick_is_read_from_every_step_not_the_medi
         code, out, err, _ = run_main(replay_main, ["info", rec])
         assert code == 0 and f"rate       {fs:.3f} Hz" in out, out
         assert read_mcap(rec).fs_hz == pytest.approx(fs, rel=1e-6)
+    # a rate given for a table whose time column agrees with it through rounding (1.5 kHz written to 4 decimals:
+    # steps of 0.0007 and 0.0006 s), or counts samples, is taken; the median of the first had refused it
+    t = np.arange(3000) / 1500.0
+    (tmp_path / "r4.csv").write_text("t,base,tip1,tip2\n" + "".join(f"{x:.4f},0,0,0\n" for x in t))
+    (tmp_path / "n.csv").write_text("t,base,tip1,tip2\n" + "".join(f"{i},0,0,0\n" for i in range(3000)))
+    assert read_csv(tmp_path / "r4.csv", fs_hz=1500.0).fs_hz == 1500.0
+    assert read_csv(tmp_path / "n.csv", fs_hz=1500.0).fs_hz == 1500.0
     # a lost frame's step (two) and a doubled stamp's (none) are left out of the mean
     assert typical_step(np.array([1.0, 1.0, 2.0, 1.0, 0.0, 1.0])) == 1.0

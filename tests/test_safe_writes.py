@@ -216,11 +216,15 @@ def test_safeio_rules(tmp_path):
         check_outputs([Output("--report", a / "x", folder=True)])
     locked = tmp_path / "locked"
     locked.mkdir(mode=0o555)
-    if not os.access(locked, os.W_OK):  # (root may write in it all the same)
-        for out in (Output("--json", locked / "r.json"), Output("--report", locked / "rep", folder=True),
-                    Output("--report", locked, folder=True)):
-            with pytest.raises(ValueError, match=f"cannot write in {locked}"):
+    # a folder no one may write in: one made read-only (root may write in it all the same), and /proc/sys, which
+    # the kernel keeps so for root too
+    for ro in [p for p in (locked, Path("/proc/sys")) if p.is_dir() and not os.access(p, os.W_OK)]:
+        for out in (Output("--json", ro / "r.json"), Output("--report", ro / "rep", folder=True)):
+            with pytest.raises(ValueError, match=f"cannot write in {ro} "):
                 check_outputs([out])
+    if not os.access(locked, os.W_OK):  # an existing report folder is written in too: it must be writable
+        with pytest.raises(ValueError, match=f"cannot write in {locked} "):
+            check_outputs([Output("--report", locked, folder=True)])
     locked.rmdir()
     # a folder: new ones appear whole; into an existing one only the report's files are replaced
     with safe_folder(tmp_path / "rep") as d:

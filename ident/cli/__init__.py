@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import select
 import sys
 from collections.abc import Callable
 from importlib.metadata import PackageNotFoundError, version
@@ -44,19 +45,35 @@ def run_guarded(prog: str, func: Callable[[argparse.Namespace], int], args: argp
         code = func(args)
         sys.stdout.flush()  # (a pipe's reader gone is found here, not in the interpreter's exit)
         return code
-    except BrokenPipeError:  # what reads the output went away (`replay info F | head -3`): no more to say
-        try:
+    except BrokenPipeError as exc:
+        if not _stdout_gone():  # a pipe of another kind (a port, a child's): an error as any other
+            return _refused(prog, exc)
+        try:  # what reads the output went away (`replay info F | head -3`): no more to say
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # (so the exit's flush is quiet)
         except (OSError, ValueError, AttributeError):
             pass
         return 141  # (as a command killed by SIGPIPE: 128 + 13)
     except (ValueError, OSError) as exc:
-        text = " ".join(str(exc).split()) or type(exc).__name__
-        print(f"{prog}: error: {text}", file=sys.stderr)
-        return 2
+        return _refused(prog, exc)
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
+
+
+def _refused(prog: str, exc: BaseException) -> int:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    print(f"{prog}: error: {text}", file=sys.stderr)
+    return 2
+
+
+def _stdout_gone() -> bool:
+    """Is standard output a pipe whose reader has closed it (poll says POLLERR on its write end)?"""
+    try:
+        poll = select.poll()
+        poll.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & select.POLLERR for _, ev in poll.poll(0))
+    except (OSError, ValueError, AttributeError):  # no descriptor (a test's StringIO), or no poll here
+        return False
 
 
 def number(lo: float | None = None, hi: float | None = None, *, gt: bool = False, integer: bool = False,

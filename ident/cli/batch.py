@@ -406,7 +406,8 @@ def run(args) -> int:
         with safe_folder(args.report, inputs=p.inputs + [args.output], force=args.force) as folder:
             write_report(rows, folder, args.output)
         print(f"report: {args.report / 'README.md'}")
-    return 1 if any(r["error"] for r in rows) else 0  # (finished, but not every row: a script should know)
+    named = set(p.files)  # (a row of a file no longer named stays in the table but is not this run's)
+    return 1 if any(r["error"] for r in rows if r["file"] in named) else 0  # (a script should know)
 
 
 def summary(rows: list[dict], path: Path) -> str:

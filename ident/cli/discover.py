@@ -12,6 +12,7 @@ repeated; defaults are the rig's base, tip1 and tip2 accelerations. START:STOP a
 from __future__ import annotations
 
 import json
+import re
 import sys
 import time
 from collections.abc import Callable
@@ -77,8 +78,8 @@ def load_model(path: Path) -> RigParams:
     return parse_config(data, str(path)).rig.rig
 
 
-# what a column's name says it holds (a part of the name, any case): a kind left off is the default, and a
-# column named for another kind is refused rather than read as the default (a "displacement" read as an
+# what a column's name says it holds (a word of the name starting so, any case): a kind left off is the
+# default, and a column whose name says another kind is refused rather than read as the default (a "displacement" read as an
 # acceleration had given a cubic 2.5e7 times too large, exit 0)
 NAMED_KINDS = {"disp": "displacement", "vel": "velocity", "acc": "acceleration", "force": "force", "volt": "voltage"}
 
@@ -86,11 +87,13 @@ NAMED_KINDS = {"disp": "displacement", "vel": "velocity", "acc": "acceleration",
 def _spec(text: str, kinds: tuple[str, ...], default: str, what: str) -> tuple[str, str]:
     col, _, kind = text.partition(":")
     if not kind:
-        said = {k for part, k in NAMED_KINDS.items() if part in col.lower()}
-        said = {("base_acceleration" if k == "acceleration" and "base_acceleration" in kinds else k) for k in said}
-        if len(said) == 1 and (named := said.pop()) != default and named in kinds:
-            raise ValueError(f"{what} {col!r}: no kind given, and its name says {named.replace('_', ' ')} where the "
-                             f"default is {default.replace('_', ' ')}: give {col}:{named} (or {col}:{default})")
+        said = sorted({k for word in re.findall(r"[a-z]+", col.lower()) for part, k in NAMED_KINDS.items()
+                       if word.startswith(part)})  # (words' starts: "tip_travel" says no velocity)
+        said = [("base_acceleration" if k == "acceleration" and "base_acceleration" in kinds else k) for k in said]
+        other = [k for k in said if k != default and k in kinds]
+        if other:
+            raise ValueError(f"{what} {col!r}: no kind given, and its name says {other[0].replace('_', ' ')} where "
+                             f"the default is {default.replace('_', ' ')}: give {col}:{other[0]} (or {col}:{default})")
     kind = kind or default
     if kind not in kinds:
         raise ValueError(f"{what} {col!r}: kind {kind!r} is not one of {', '.join(kinds)}")

@@ -47,23 +47,14 @@ def read_samples(path: str | Path, **options) -> Samples:
     """Base, tip1, tip2 on a uniform grid; options as the format takes them (CSV: time_col, fs_hz,
     base, tip1, tip2; ``fill=False``: rows as recorded). Options given as None are ignored."""
     module = format_of(path)
-    _own_times(module, options.get("time_col"), options.get("fs_hz"))
     return module.read_samples(path, **{k: v for k, v in options.items() if v is not None})
-
-
-def _own_times(module, time_col: str | None, fs_hz: float | None) -> None:
-    """A recording carries its own times: a rate or a time column given for one is refused, not ignored."""
-    if module is mcap and (time_col is not None or fs_hz is not None):
-        raise ValueError("--time and --fs are for tables (CSV, MAT, TDMS); a recording (MCAP) carries its own times")
 
 
 def read_columns(path: str | Path, names: list[str], time_col: str | None = None,
                  fs_hz: float | None = None, gaps: bool = False) -> Columns:
     """Named signals ({name: array}) and their rate; with ``gaps``, NaN where a value is missing (a lost
     frame, an empty or NaN cell, a hole in a time column) instead of an error."""
-    module = format_of(path)
-    _own_times(module, time_col, fs_hz)
-    return module.read_columns(path, list(names), time_col, fs_hz, gaps)
+    return format_of(path).read_columns(path, list(names), time_col, fs_hz, gaps)
 
 
 def read_column_matrix(path: str | Path, names: list[str], time_col: str | None = None,

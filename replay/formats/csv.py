@@ -161,11 +161,11 @@ def _rate_agrees(path: Path, rows: list[list[str]], header: list[str], fs_hz: fl
         return
     j = header.index(col)
     try:
-        step = float(np.median(np.diff([_number(r[j], None, comma) for r in rows])))
+        _, rate = _grid(path, np.array([_number(r[j], None, comma) for r in rows]), col)  # (the reader's own rate)
     except (ValueError, IndexError):
-        return  # not a column of numbers: the --fs decides
-    if step > 0 and abs(fs_hz * step - 1) > 0.01:
-        raise ValueError(f"{path}: --fs {fs_hz:g} Hz, but column {col!r} steps at {1 / step:.6g} Hz (read as "
+        return  # not a uniform column of seconds (sample numbers, milliseconds, text): the --fs decides
+    if abs(fs_hz / rate - 1) > 0.01:
+        raise ValueError(f"{path}: --fs {fs_hz:g} Hz, but column {col!r} steps at {rate:.6g} Hz (read as "
                          f"seconds): leave --fs out to take the column's times, or, if {col!r} is not in seconds, "
                          f"rename it ({', '.join(TIME_NAMES)} are taken for time)")
 

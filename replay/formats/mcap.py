@@ -106,7 +106,7 @@ class Damage:
         if self.what == "bytes":
             return f"bytes {self.offset}-{self.end - 1} unreadable ({self.reason})"
         if self.what == "calibration metadata":
-            return f"calibration metadata at byte {self.offset} damaged ({self.reason})"
+            return f"calibration metadata{f' at byte {self.offset}' if self.offset >= 0 else ''} damaged ({self.reason})"
         return f"{self.what} at byte {self.offset} unreadable ({self.reason})"
 
 
@@ -554,20 +554,28 @@ def _check_calibration(s: Scan) -> None:
     into m/s^2, are checked against those of the attached config, and a difference is damage (one changed digit
     had exported tip 1 19 x too large, exit 0, and ``replay recover`` had called the file whole)."""
     found = [(i, m) for i, (name, m) in enumerate(s.metadata) if name == "calibration"]
-    want = attached_calibration(s) if found else None
+    # a compact recording's samples are its serial bytes, read through the calibration: there it must be whole
+    # (one changed byte in a key or in the record's name had read as no samples at all, and recover as whole)
+    compact = bool(s.topic_ids(TOPICS["raw"])) and not s.topic_ids(TOPICS["accel"]) and raw_is_frames(s)
+    want = attached_calibration(s) if found or compact else None
     if not want:
+        return
+    if not found:
+        s.damage.append(Damage(-1, -1, "calibration metadata", "no record of it, where the config attached "
+                                                               "(CRC-checked) gives one: its name damaged?"))
         return
     i, cal = found[-1]
     for key, value in want.items():
-        if key.endswith(CALIBRATED) and key in cal:
+        if key.endswith(CALIBRATED) and (key in cal or compact):
             try:
-                same = float(cal[key]) == float(value)
+                same = key in cal and float(cal[key]) == float(value)
             except ValueError:
                 same = False
             if not same:
                 a, b = s.metadata_at[i]
+                got = f"{key} = {cal[key]}" if key in cal else f"no {key}"
                 s.damage.append(Damage(a, b, "calibration metadata",
-                                       f"{key} = {cal[key]} where the config attached (CRC-checked) gives {value}"))
+                                       f"{got} where the config attached (CRC-checked) gives {value}"))
                 return
 
 
@@ -800,6 +808,9 @@ def _session_index(seq: np.ndarray, restart: np.ndarray, starts: list[float], fs
     return index
 
 
+OWN_TIMES = "--time and --fs are for tables (CSV, MAT, TDMS); a recording (MCAP) carries its own times"
+
+
 def read_samples(path: str | Path, *, fill: bool = True, **unused) -> Samples:
     """Samples of an intact recording: decoded in bulk from its raw bytes (fast), else from /rig/accel.
 
@@ -807,7 +818,7 @@ def read_samples(path: str | Path, *, fill: bool = True, **unused) -> Samples:
     stays uniform; a device restart starts a new session at its place on the timeline.
     """
     if unused and any(v is not None for k, v in unused.items() if k not in ("base", "tip1", "tip2")):
-        raise ValueError("--time and --fs are for CSV files; a recording carries its own times")
+        raise ValueError(OWN_TIMES)
     s = open_intact(path)
     path = Path(path)
     ev_ids, raw_ids = s.topic_ids(TOPICS["events"]), s.topic_ids(TOPICS["raw"])
@@ -843,7 +854,7 @@ def read_columns(path: str | Path, names: list[str], time_col: str | None = None
     """Channels base, tip1, tip2 of a recording by name; with ``gaps``, NaN on the rows of lost frames
     (else interpolated over them, as ``read_samples`` fills them)."""
     if time_col is not None or fs_hz is not None:
-        raise ValueError("--time and --fs are for CSV files; a recording carries its own times")
+        raise ValueError(OWN_TIMES)
     bad = [c for c in names if c not in CHANNELS]
     if bad:
         raise ValueError(f"a recording has the channels base, tip1, tip2; not {bad[0]!r}")
