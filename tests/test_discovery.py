@@ -191,12 +191,13 @@ def test_bad_arguments_are_one_line_exit_2(args, match):
      "response 'Displacement [m]': no kind given, and its name says displacement where the default is acceleration"),
     (["--excitation", "force:force", "--response", "tip_vel"], "its name says velocity"),
     (["--excitation", "force_volt", "--response", "x:displacement"], "its name says force"),  # (two kinds named)
+    (["--excitation", "force:force", "--response", "tipDisp"], "its name says displacement"),  # (camelCase words)
 ])
 def test_a_column_named_for_another_kind_than_the_default_needs_its_kind(tmp_path, spec, match):
     # a "displacement" column read as an acceleration had run to a cubic 2.5e7 times too large, exit 0
     path = tmp_path / "d.csv"
-    path.write_text("t,force,x,Displacement [m],tip_vel,force_volt\n"
-                    + "".join(f"{i / 1000},0,0,0,0,0\n" for i in range(100)))
+    path.write_text("t,force,x,Displacement [m],tip_vel,force_volt,tipDisp\n"
+                    + "".join(f"{i / 1000},0,0,0,0,0,0\n" for i in range(100)))
     code, out, err, tb = run_main(ident_main, ["discover", path, *spec])
     assert tb is None and code == 2 and out == "" and len(err.strip().splitlines()) == 1, (code, err, tb)
     assert match in err, err

@@ -459,5 +459,7 @@ def test_a_rate_whose_step_is_no_whole_tick_is_read_from_every_step_not_the_medi
     (tmp_path / "n.csv").write_text("t,base,tip1,tip2\n" + "".join(f"{i},0,0,0\n" for i in range(3000)))
     assert read_csv(tmp_path / "r4.csv", fs_hz=1500.0).fs_hz == 1500.0
     assert read_csv(tmp_path / "n.csv", fs_hz=1500.0).fs_hz == 1500.0
+    (tmp_path / "broken.csv").write_text("t,base,tip1,tip2\n0,0,0,0\nnan,0,0,0\n0,0,0,0\n")  # (what --fs is for)
+    assert read_csv(tmp_path / "broken.csv", fs_hz=1000.0).fs_hz == 1000.0  # (had divided by zero)
     # a lost frame's step (two) and a doubled stamp's (none) are left out of the mean
     assert typical_step(np.array([1.0, 1.0, 2.0, 1.0, 0.0, 1.0])) == 1.0

@@ -87,7 +87,8 @@ NAMED_KINDS = {"disp": "displacement", "vel": "velocity", "acc": "acceleration",
 def _spec(text: str, kinds: tuple[str, ...], default: str, what: str) -> tuple[str, str]:
     col, _, kind = text.partition(":")
     if not kind:
-        said = sorted({k for word in re.findall(r"[a-z]+", col.lower()) for part, k in NAMED_KINDS.items()
+        words = [w.lower() for w in re.findall(r"[A-Z]?[a-z]+|[A-Z]+(?![a-z])", col)]  # (tipDisp: tip, disp)
+        said = sorted({k for word in words for part, k in NAMED_KINDS.items()
                        if word.startswith(part)})  # (words' starts: "tip_travel" says no velocity)
         said = [("base_acceleration" if k == "acceleration" and "base_acceleration" in kinds else k) for k in said]
         other = [k for k in said if k != default and k in kinds]

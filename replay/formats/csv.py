@@ -161,7 +161,10 @@ def _rate_agrees(path: Path, rows: list[list[str]], header: list[str], fs_hz: fl
         return
     j = header.index(col)
     try:
-        _, rate = _grid(path, np.array([_number(r[j], None, comma) for r in rows]), col)  # (the reader's own rate)
+        t = np.array([_number(r[j], None, comma) for r in rows])
+        if not np.all(np.isfinite(t)):
+            return  # a broken time column: the --fs decides (it is what --fs is for)
+        _, rate = _grid(path, t, col)  # (the reader's own rate)
     except (ValueError, IndexError):
         return  # not a uniform column of seconds (sample numbers, milliseconds, text): the --fs decides
     if abs(fs_hz / rate - 1) > 0.01:
