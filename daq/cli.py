@@ -239,7 +239,7 @@ def _record(args, acq: Acquisition, rec: McapRecorder, live: LiveProcessing | No
     except OSError as exc:  # the disk full, a file-size limit, the medium gone: say where the samples are
         part = part_path(out)
         to, k = out, 1
-        while to.exists() or part_path(to).exists():  # (the target appeared meanwhile: a free name)
+        while to.exists():  # (the target appeared meanwhile: a free name)
             to, k = out.with_name(f"{out.stem}-recovered{'' if k == 1 else f'-{k}'}{out.suffix}"), k + 1
         kept = (f"what came before is in {part}: recover it with `replay recover {part} -o {to}`"
                 if part.exists() else f"what came before is in {out}" if out.exists() else "nothing was kept")
