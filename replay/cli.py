@@ -51,9 +51,8 @@ def _csv_options(p) -> None:
 
 
 def _read_options(args) -> dict:
-    """Reading options for the input's format (CSV/MAT columns and times; a recording takes none)."""
-    if formats.format_of(args.file) is formats.mcap:  # (its reader refuses a time column or a rate: its own times)
-        return {"time_col": args.time_col, "fs_hz": args.fs_hz}
+    """Reading options for the input's format: CSV/MAT columns and times (a recording's reader takes its own
+    channels and refuses a time column or a rate: it carries its own times)."""
     return {"time_col": args.time_col, "fs_hz": args.fs_hz, "base": args.base, "tip1": args.tip1, "tip2": args.tip2}
 
 

@@ -889,6 +889,15 @@ def test_a_clipped_excitation_is_named_and_a_synthesised_sine_is_not():
     assert _input_clipped(Channel("force", "force", f)) == []
 
 
+def _with_a_dead_sensor(f: np.ndarray, y: np.ndarray, fs: float, rng, name: str) -> tuple[np.ndarray, Measurement]:
+    """A sensor that reads a constant and noise (unplugged, or a laser that lost its signal) as the second of
+    three responses, between the two masses' (``two_masses_pushed``): its reading and the measurement."""
+    dead = 0.3 + 0.01 * y[:, 0].std() * rng.standard_normal(len(f))
+    return dead, Measurement(fs, Channel("force", "force", f), (Channel("a1", "acceleration", y[:, 0]),
+                                                                 Channel(name, "acceleration", dead),
+                                                                 Channel("a2", "acceleration", y[:, 1])))
+
+
 def test_a_dead_sensor_is_left_out_and_named_and_the_rest_is_analysed():
     # two unit masses on springs (3.1 and 12.8 Hz, stiffness-proportional damping: 0.8 and 3.2 %), the first
     # pushed by a random force, integrated by scipy (lsim); a third accelerometer reads a constant and noise
@@ -899,10 +908,7 @@ def test_a_dead_sensor_is_left_out_and_named_and_the_rest_is_analysed():
     rng = np.random.default_rng(4)
     f = lfilter(*butter(4, 40 / (fs / 2)), rng.standard_normal(t.size))
     y = two_masses_pushed(f, fs, rng)
-    dead = 0.3 + 0.01 * y[:, 0].std() * rng.standard_normal(t.size)
-    m = Measurement(fs, Channel("force", "force", f), (Channel("a1", "acceleration", y[:, 0]),
-                                                        Channel("dead", "acceleration", dead),
-                                                        Channel("a2", "acceleration", y[:, 1])))
+    dead, m = _with_a_dead_sensor(f, y, fs, rng, "dead")
     band = preliminary_band(m)
     # the first mode (3.1 Hz, 0.8 %: a 6.7 s time constant) outlasts a segment of a sixteenth (2 s): its
     # coherence is lowered there, not with quarters; the coherence of unrelated signals averaged over 31 and 7 half-overlapped
@@ -940,10 +946,7 @@ def test_a_dead_sensor_on_a_hammer_record_is_one_its_hits_leave_without_ringing(
         i = int(at * fs)
         f[i:i + pulse.size] += 50.0 * pulse
     y = two_masses_pushed(f, fs, rng)
-    dead = 0.3 + 0.01 * y[:, 0].std() * rng.standard_normal(t.size)
-    m = Measurement(fs, Channel("force", "force", f), (Channel("a1", "acceleration", y[:, 0]),
-                                                        Channel("laser", "acceleration", dead),
-                                                        Channel("a2", "acceleration", y[:, 1])))
+    dead, m = _with_a_dead_sensor(f, y, fs, rng, "laser")
     band = preliminary_band(m)
     live = [hit_response(f, y[:, i], fs, band) for i in range(2)]
     assert min(live) > 10 * HIT_RESPONSE

@@ -79,8 +79,8 @@ def load_model(path: Path) -> RigParams:
 
 
 # what a column's name says it holds (a word of the name starting so, any case): a kind left off is the
-# default, and a column whose name says another kind is refused rather than read as the default (a "displacement" read as an
-# acceleration had given a cubic 2.5e7 times too large, exit 0)
+# default, and a column whose name says another kind is refused rather than read as the default (a
+# "displacement" read as an acceleration had given a cubic 2.5e7 times too large, exit 0)
 NAMED_KINDS = {"disp": "displacement", "vel": "velocity", "acc": "acceleration", "force": "force", "volt": "voltage"}
 
 
