@@ -18,11 +18,14 @@ import importlib
 import numpy as np
 import pytest
 from scipy.signal import butter, sosfiltfilt
+from scipy.stats import wilcoxon
+from threadpoolctl import threadpool_limits
 
 from daq.sim.independent.cases import discovery_case
 from ident.cli.bench_discovery import independent_case, judge
 from ident.discovery import Settings, discover
-from ident.discovery.discover import noise_floor
+from ident.discovery.discover import PIECE_PERIODS, noise_floor
+from ident.discovery.search import block_errors, simulation_bound
 
 
 @pytest.fixture(scope="module")
@@ -89,6 +92,17 @@ def test_a_gain_that_is_only_the_refitted_linear_parts_is_not_a_finding(cases):
     borrowed = [x for x in refitted if x.gain > 0.5 and x.own_gain < 0.03]  # gains that are the linear part's
     assert borrowed  # and none is a finding: every finding gains over its own linear part
     assert all(x.own_gain > 0.03 for x in d.findings if x.baseline is not None), d.verdict()
+    # the signed-rank test against that linear part alone, reported beside its gain (not selected on:
+    # the README's stop-75 study), recomputed here with scipy from the linear part's own free runs
+    k = max(borrowed, key=lambda x: x.gain)
+    prep, split = d.prep, d.split
+    scale = np.maximum(prep.measured[split.rows("test")].std(axis=0), 1e-300)
+    piece = max(16, int(PIECE_PERIODS * prep.fs_hz / (prep.band[0] / 0.4)))
+    with threadpool_limits(limits=1, user_api="blas"):
+        alone, _ = block_errors(k.baseline, k.baseline.model, prep, split.test, d.warm, scale, (),
+                                simulation_bound(prep), piece)
+    assert alone.shape == k.block_errors.shape
+    assert k.own_p == pytest.approx(wilcoxon(alone - k.block_errors, alternative="greater").pvalue, rel=1e-9)
 
 
 def test_a_baseline_worse_than_predicting_zero_is_said(cases):

@@ -109,6 +109,7 @@ def candidate_json(c: Candidate, fs_hz: float | None = None) -> dict:
     return finite({"effect": c.cause, "response": c.location, "parameters": c.parameters, "units": units,
                    "physical": c.physical, "gain": c.gain, "gain_over_own_linear_part": c.own_gain,
                    "gain_over_own_linear_part_in_training": c.own_gain_trained,
+                   "p_value_over_own_linear_part": c.own_p,
                    "test_nrmse": c.test_nrmse, "p_value": c.p_value,
                    "fit_r2": c.fit_r2, "refined": c.refined, "note": c.note or None})
 

@@ -85,6 +85,7 @@ class Candidate:
     p_value: float = float("nan")  # paired test against the baseline
     own_gain: float = float("nan")  # 1 - test NRMSE / that of its own linear part alone (refitted with it)
     own_gain_trained: float = float("nan")  # the same over the training blocks (``score``: where it is asked)
+    own_p: float = float("nan")  # the signed-rank test against that linear part alone (reported, not selected on)
     refined: bool = False
     baseline: Baseline | None = None  # its own linear part when refitted jointly
     note: str = ""
@@ -262,15 +263,16 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
     # computed only for a candidate that gains at all: one that does not beat the baseline is no finding
     # whatever its own gain (``significant``: gain above a floor >= 0), and the check costs a second
     # simulation of every held-out block
-    own_gain = own_trained = float("nan")
+    own_gain = own_trained = own_p = float("nan")
     comp = compensation(c)
     if (c.baseline is not None or comp) and c.elements and gain > 0:
         try:
-            _, alone = block_errors(own, own.model.with_elements(comp), prep, split.test, sc.warm, sc.scale, (),
-                                    sc.bound, sc.piece)
+            alone_errs, alone = block_errors(own, own.model.with_elements(comp), prep, split.test, sc.warm, sc.scale,
+                                             (), sc.bound, sc.piece)
         except NUMERIC_FAILURES:
-            alone = np.inf
+            alone_errs, alone = None, np.inf
         own_gain = 1.0 - nrmse / alone if np.isfinite(alone) and alone > 0 else 1.0
+        own_p = signed_rank_p(alone_errs, errs) if alone_errs is not None else 0.0
         if own_gain <= sc.floor:
             own_trained = _own_gain_trained(c, own, comp, prep, split, sc)
     p_value = signed_rank_p(sc.block_errors, errs)
@@ -288,7 +290,7 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
         except NUMERIC_FAILURES:
             pass
     return replace(c, block_errors=errs, test_nrmse=nrmse, gain=gain, p_value=p_value, own_gain=own_gain,
-                   own_gain_trained=own_trained)
+                   own_gain_trained=own_trained, own_p=own_p)
 
 
 def _own_gain_trained(c: Candidate, own: Baseline, comp: tuple, prep: Prepared, split: Split, sc: Scoring) -> float:
