@@ -671,6 +671,29 @@ def test_a_cause_its_linear_part_matches_on_held_out_blocks_needs_half_the_train
     assert significant(replace(c, own_gain=0.05), settings)  # over the floor on held-out blocks: not asked
 
 
+@pytest.mark.parametrize("cause,found", [("cubic_stiffness", False), ("contact", True)])
+def test_a_cause_must_beat_its_own_linear_part_in_the_typical_piece_unless_it_acts_in_few(cause, found):
+    # independent seed 389's shape: a cubic refitted with its own linear part cuts that part's held-out error
+    # by several per cent on average, over the 3 % floor, while most pieces are a little worse; four pieces
+    # much better carry the mean. The signed-rank test over the pieces says the cubic is not better than
+    # its linear part alone. A stopper acts in a few pieces by nature (seeds 81 and 92, true contacts, p =
+    # 0.20 and 0.14 there): its test stays on the mean gain
+    rng = np.random.default_rng(3)
+    alone = rng.uniform(0.05, 0.07, 40)
+    ratio = 1.015 * (1 + rng.normal(0, 0.005, 40))
+    ratio[:4] = 0.5  # four pieces much better
+    errs = alone * ratio
+    own_gain = 1 - errs.mean() / alone.mean()
+    own_p = signed_rank_p(alone, errs)
+    settings = Settings()
+    assert own_gain > settings.gain_floor and own_p > 0.99  # better on average, worse in the typical piece
+    c = replace(_scored(cause, np.full(40, 0.02)), own_gain=own_gain, own_p=own_p)
+    assert significant(c, settings) is found
+    assert significant(replace(c, own_p=0.01), settings)  # better in the typical piece too
+    # where the held-out blocks do not show it, the training blocks may (a cause that acts only there)
+    assert significant(replace(c, own_gain_trained=0.6), settings)
+
+
 def test_one_cause_at_another_place_is_a_look_alike_and_between_the_same_sensors_is_not():
     # independent seed 17's shape: a contact between a1 and a2 first, the same contact at a1 (to the
     # ground) within the noise of it, and its twin between the same sensors with the other sign convention

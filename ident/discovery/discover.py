@@ -570,7 +570,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     scale = np.maximum(prep.measured[test_rows].std(axis=0), 1e-300)
     piece = max(16, int(PIECE_PERIODS * prep.fs_hz / f_min))
     e0, n0 = block_errors(baseline, baseline.model, prep, split.test, warm, scale, (), bound, piece)
-    sc = Scoring(scale, e0, n0, warm, bound, piece, settings.gain_floor)
+    sc = Scoring(scale, e0, n0, warm, bound, piece, settings.gain_floor, settings.alpha)
     kind = "rig model" if rig is not None else "modal model"
     k = len(baseline.model.frequencies_hz)
     say(f"baseline: {kind} with {k} mode{'' if k == 1 else 's'}, band {prep.band[0]:.3g}-"
@@ -943,8 +943,8 @@ def _linear_corrections(comp_scored: list[Candidate], settings: Settings) -> lis
     """The best compensated candidate that ``significant`` turned down only because its own spring and
     damper alone predict better than the baseline: a person should know that the fitted linear part is
     off there, and that the cause on top of its correction is not a finding."""
-    held = [c for c in comp_scored if np.isfinite(c.gain) and not significant(c, settings)
-            and significant(replace(c, own_gain=max(c.own_gain, c.gain)), settings)]
+    held = [c for c in comp_scored if np.isfinite(c.gain) and not significant(c, settings) and c.own_gain < c.gain
+            and significant(replace(c, own_gain=max(c.own_gain, c.gain), own_p=0.0), settings)]
     if not held:
         return []
     c = max(held, key=lambda c: c.gain)

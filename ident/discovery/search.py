@@ -85,7 +85,7 @@ class Candidate:
     p_value: float = float("nan")  # paired test against the baseline
     own_gain: float = float("nan")  # 1 - test NRMSE / that of its own linear part alone (refitted with it)
     own_gain_trained: float = float("nan")  # the same over the training blocks (``score``: where it is asked)
-    own_p: float = float("nan")  # the signed-rank test against that linear part alone (reported, not selected on)
+    own_p: float = float("nan")  # the signed-rank test against that linear part alone (``over_own_part``)
     refined: bool = False
     baseline: Baseline | None = None  # its own linear part when refitted jointly
     note: str = ""
@@ -161,6 +161,7 @@ class Scoring:
     bound: float
     piece: int  # samples per piece of the paired test
     floor: float = 0.03  # the gain floor (``Settings.gain_floor``): below it the training blocks are asked too
+    alpha: float = 0.1  # the tests' level (``Settings.alpha``)
 
 
 def simulation_bound(prep: Prepared) -> float:
@@ -273,7 +274,7 @@ def score(c: Candidate, baseline: Baseline, prep: Prepared, split: Split, sc: Sc
             alone_errs, alone = None, np.inf
         own_gain = 1.0 - nrmse / alone if np.isfinite(alone) and alone > 0 else 1.0
         own_p = signed_rank_p(alone_errs, errs) if alone_errs is not None else 0.0
-        if own_gain <= sc.floor:
+        if not over_own_part(replace(c, own_gain=own_gain, own_p=own_p), sc.floor, sc.alpha):
             own_trained = _own_gain_trained(c, own, comp, prep, split, sc)
     p_value = signed_rank_p(sc.block_errors, errs)
     if CAUSES[c.cause].read_off_record and np.isfinite(nrmse):
@@ -862,10 +863,31 @@ class Selection:
     reasons: list[str]
 
 
+def over_own_part(c: Candidate, floor: float, alpha: float) -> bool:
+    """Does a candidate refitted with its own linear part beat that part alone on the held-out blocks (true
+    where it has none: nothing to ask)? By more than the gain floor, and, unless the cause acts in a few
+    pieces by nature (``Cause.intermittent``, a stopper), in the typical piece: the signed-rank test over
+    the pieces (``own_p``) at ``alpha``, the test a cause meets against the baseline.
+
+    A few pieces much better carry a mean gain over the floor while most pieces are worse: that gain is
+    the refit's, not the cause's (independent seed 389, a joint at tip 2: a cubic there 15 % better than
+    its own part on average, p = 0.77 piece by piece, made the answer "ambiguous: cubic or joint"; 428
+    and 441 likewise). A stopper's gain lives in the pieces where it touches, and the typical piece does
+    not show it (seeds 81 and 92, true contacts, own gains 0.06 and 0.33 at p = 0.20 and 0.14). Measured
+    whole (stop 75): seeds 0-99 unchanged (75 / 90 / 0), 300-399 +1 named right, 400-499 +2 and two
+    false extra findings fewer; asking stoppers too lost 81 and 92."""
+    if np.isnan(c.own_gain):
+        return True
+    if c.own_gain <= floor:
+        return False
+    return CAUSES[c.cause].intermittent or not c.own_p >= alpha
+
+
 def significant(c: Candidate, settings: Settings) -> bool:
     """Does a scored candidate beat the baseline: below predicting zero, by more than the gain floor, by
-    the paired test, and by more than the gain floor over its own linear part alone (``score``), or, where
-    it does not on held-out blocks, by ``ACTS_IN_TRAINING`` over the training blocks (``_own_gain_trained``)?
+    the paired test, and over its own linear part alone (``over_own_part``: by the gain floor, in the
+    typical piece unless it is a stopper), or, where it does not on held-out blocks, by ``ACTS_IN_TRAINING``
+    over the training blocks (``_own_gain_trained``)?
 
     A compensated candidate (``regressions``) must also gain more over its own spring and damper than the
     whole of it gains over the baseline: ``own_gain < gain`` is the same as "the spring and the damper
@@ -877,7 +899,7 @@ def significant(c: Candidate, settings: Settings) -> bool:
     (the softening family's seed 17, nothing hidden: the spring and damper alone 0.0512 against the
     baseline's 0.0549, a Coulomb friction on top 0.0485, named at p = 6e-39 before this rule)."""
     return (np.isfinite(c.test_nrmse) and c.test_nrmse < 1.0 and c.gain > settings.gain_floor
-            and not (c.own_gain <= settings.gain_floor and not c.own_gain_trained >= ACTS_IN_TRAINING)
+            and (over_own_part(c, settings.gain_floor, settings.alpha) or c.own_gain_trained >= ACTS_IN_TRAINING)
             and c.p_value < settings.alpha
             and not (compensation(c) and c.own_gain < c.gain))
 
