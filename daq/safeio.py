@@ -259,6 +259,26 @@ class PartFile:
         return self.path
 
 
+    @classmethod
+    def resumed(cls, path: str | Path, keep: int, label: str = "output", mode: str = "a") -> "PartFile":
+        """The ``.part`` a run cut short left beside ``path``, opened to append after its first ``keep``
+        bytes (what follows them, a line cut off mid-way, is dropped). The target itself must not exist:
+        a resumed part is renamed onto it as any other (:meth:`commit`)."""
+        self = cls.__new__(cls)
+        self.path, self.part = Path(path), part_path(path)
+        self.inputs, self.force, self.label = [], False, label
+        if self.path.exists() or self.path.is_symlink():
+            raise ValueError(f"{self.path} exists: a finished run is not resumed (give another name)")
+        try:
+            fd = os.open(self.part, os.O_WRONLY)
+        except FileNotFoundError:
+            raise ValueError(f"{self.part} does not exist: nothing to resume") from None
+        os.ftruncate(fd, keep)
+        os.lseek(fd, 0, os.SEEK_END)
+        self.file = os.fdopen(fd, mode)
+        self.committed = False
+        return self
+
     def abort(self) -> None:
         """Remove the ``.part`` (for a command that fails before it has recorded anything)."""
         if not self.committed:

@@ -83,6 +83,47 @@ def test_bench_discovery_save_leaves_no_part_when_nothing_ran_and_keeps_a_cut_on
     assert part.read_text() == '{"seed": 0}\n' and not out.exists()
 
 
+def test_bench_discovery_resumes_a_run_cut_short_and_ends_as_the_whole_run(tmp_path):
+    """--resume keeps the whole lines of a part a run cut short left (a line cut off mid-way is dropped),
+    runs only the cases it lacks, and ends with the file and the report of a run that never stopped; a
+    part from another run, a missing part, or --resume without --save is refused with one line, and the
+    part is left as it was."""
+    argv = ["bench", "discovery", "--generator", "rig", "--cases", "2", "--seed", "10", "--duration", "3"]
+    whole = tmp_path / "whole.jsonl"
+    code, printed_whole, err, tb = run_main(ident_main, [*argv, "--save", str(whole)])
+    assert code == 0 and tb is None, err
+    first, second = whole.read_bytes().splitlines(keepends=True)
+    out = tmp_path / "cut.jsonl"
+    part = tmp_path / "cut.jsonl.part"
+    part.write_bytes(first + second[:40])  # cut short while writing seed 11's line
+
+    other = [*argv[:-4], "--seed", "11", "--duration", "3", "--save", str(out), "--resume"]
+    code, _, err, tb = run_main(ident_main, other)
+    assert code == 2 and tb is None and "line 1" in err and "seed 10" in err and "seed 11" in err
+    assert part.read_bytes() == first + second[:40] and not out.exists()
+    for bad, says in (([*argv, "--resume"], "--save"),
+                      ([*argv, "--save", str(tmp_path / "none.jsonl"), "--resume"], "nothing to resume")):
+        code, _, err, tb = run_main(ident_main, bad)
+        assert code == 2 and tb is None and says in err, err
+
+    code, printed, err, tb = run_main(ident_main, [*argv, "--save", str(out), "--resume"])
+    assert code == 0 and tb is None, err
+    assert not part.exists()
+    lines = out.read_bytes().splitlines(keepends=True)
+    assert lines[0] == first  # the first run's line, as it was
+    again, before = json.loads(lines[1]), json.loads(second)
+    assert again["seed"] == 11 and again["discovery"] == before["discovery"]
+    assert {k: v for k, v in again["verdict"].items() if k != "seconds"} == \
+        {k: v for k, v in before["verdict"].items() if k != "seconds"}
+    # the report over both: the resumed case's line as the first run printed it, the summary the same
+    assert "resumed 1 records from" in printed
+
+    def same(text: str) -> str:
+        return _without_times("\n".join(line for line in text.splitlines()
+                                         if not line.startswith(("resumed ", "saved "))))
+    assert same(printed) == same(printed_whole)
+
+
 def test_duffing_noise_sweep_on_dask_equals_the_serial_sweep(dask_scheduler):
     data = duffing_data(DuffingParams(t_end=20.0))  # a short record keeps the four fits quick
     args = (data, (0.25,), 2, ("paper", "realistic"), 7)

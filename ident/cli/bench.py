@@ -66,6 +66,9 @@ def add_parser(sub) -> None:
     p.add_argument("--save", type=Path, metavar="OUT.jsonl",
                    help="discovery: also write each case's truth, verdict and discover's JSON (every candidate) as "
                         "a line of OUT.jsonl, for studies without running the cases again (never replaces a file)")
+    p.add_argument("--resume", action="store_true",
+                   help="discovery with --save: continue the run cut short whose OUT.jsonl.part is there: its whole "
+                        "lines are kept, only the cases it lacks are run, and the report covers them all")
     p.add_argument("--duration", type=DURATION, help=f"discovery: the rig generator's case length (default "
                                                        f"{RIG_CASE_S:g} s); batch: each recording's (default 8 s); "
                                                        "memory: the record's (default 120 s)")
@@ -115,6 +118,8 @@ def _pysindy_loop(x, xdot, t, f, lambdas, n_rows):
 def run(args) -> int:
     if args.save is not None and args.what != "discovery":
         raise ValueError("--save keeps the discovery benchmark's records; it is for ident bench discovery")
+    if args.resume and args.what != "discovery":
+        raise ValueError("--resume continues an ident bench discovery --save run; it is for ident bench discovery")
     if args.family is not None and args.what != "discovery":
         raise ValueError("--family picks the discovery benchmark's cases; it is for ident bench discovery")
     if args.data is not None and args.what != "f16":
@@ -128,7 +133,7 @@ def run(args) -> int:
         if args.twins and args.generator != "independent":
             raise ValueError("--twins needs the independent generator: daq.sim.hidden has no twins")
         return run_discovery(args.generator, args.cases, args.seed, args.workers, args.scheduler,
-                             args.duration or RIG_CASE_S, args.twins, args.save, args.family)
+                             args.duration or RIG_CASE_S, args.twins, args.save, args.family, args.resume)
     if args.what != "memory" and (args.fs_hz is not None or args.max_samples is not None):
         raise ValueError("--fs and --max-samples are for ident bench memory")
     if args.what == "f16":

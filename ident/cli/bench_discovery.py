@@ -446,20 +446,31 @@ def simd_level() -> str:
 
 def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: int | None = None,
                   scheduler: str | None = None, duration_s: float = RIG_CASE_S, twins: bool = False,
-                  save: Path | None = None, family: str | None = None) -> int:
+                  save: Path | None = None, family: str | None = None, resume: bool = False) -> int:
     """The benchmark: in this process, or on a local Dask cluster of ``workers`` processes, or on the
     cluster at ``scheduler``; the lines in seed order either way. ``twins``: each independent case is
     also run without its effect (``twin_report``). ``save``: a JSON-lines file, one ``saved_record`` per
     case (and twin) in the printed order, streamed as ``NAME.part`` and renamed when the run completes (a
     run cut short leaves the part, whole lines up to its last case); an existing file is never replaced.
     ``family``: the independent generator's family on every seed instead of the family drawn
-    (``FAMILY_CAUSES``: one not drawn by default, such as ``duffing_softening``, included)."""
+    (``FAMILY_CAUSES``: one not drawn by default, such as ``duffing_softening``, included). ``resume``: the
+    part of a ``save`` run cut short (``_resumed``) gives the cases it holds, and only the rest are run."""
     t0 = time.perf_counter()
     jobs = [(generator, s, duration_s, twin, save is not None, family) for s in range(first_seed, first_seed + n_cases)
             for twin in ((False, True) if twins else (False,))]
     verdicts = []
-    out = _saving(save) if save is not None else None
+    if resume:
+        if save is None:
+            raise ValueError("--resume continues a --save run cut short: give its --save OUT.jsonl")
+        verdicts, out = _resumed(save, jobs)
+        jobs = jobs[len(verdicts):]
+    else:
+        out = _saving(save) if save is not None else None
     print(environment(), flush=True)
+    if verdicts:
+        print(f"resumed {len(verdicts)} records from {out.part} (their run times are the first run's)")
+        for v in verdicts:
+            _print(v)
     try:
         with session(scheduler, workers) as client:
             for v in ordered(client, run_case, jobs, "discovery"):
@@ -470,7 +481,8 @@ def run_discovery(generator: str, n_cases: int, first_seed: int = 0, workers: in
                 verdicts.append(v)
                 _print(v)
     except BaseException:
-        if out is not None and not verdicts:  # nothing saved yet (no scheduler, say): no part left to block a rerun
+        if out is not None and not verdicts and not resume:  # nothing saved yet (no scheduler, say): no part left
+            # to block a rerun (a resumed part is the first run's: it stays)
             out.abort()
         raise
     if out is not None:
@@ -486,11 +498,54 @@ def _saving(save: Path) -> PartFile:
     """The ``--save`` stream, refused with one line if the file or its part exists (a benchmark never replaces a
     file, and a part is a run cut short whose whole lines are worth keeping)."""
     for path, what in ((save, "give another name (a benchmark never replaces a file)"),
-                       (part_path(save), "a run cut short, whole lines up to its last case: move it away or give "
-                                         "another name")):
+                       (part_path(save), "a run cut short, whole lines up to its last case: continue it with "
+                                         "--resume, move it away or give another name")):
         if path.exists() or path.is_symlink():
             raise ValueError(f"--save: {path} exists: {what}")
     return PartFile(save, label="--save", mode="w", check=False)
+
+
+def _resumed(save: Path, jobs: list[tuple]) -> tuple[list[Verdict], PartFile]:
+    """The verdicts a run cut short saved in ``save``'s part, and the part opened to append the rest. Its
+    whole lines must be the first of ``jobs`` (same seeds, twins and generator, in order), else it is
+    refused with one line and left as it was; a line cut off mid-way at its end is dropped."""
+    part = part_path(save)
+    try:
+        data = part.read_bytes()
+    except FileNotFoundError:
+        raise ValueError(f"--resume: {part} does not exist: nothing to resume") from None
+    keep = data.rfind(b"\n") + 1
+    verdicts = []
+    for k, line in enumerate(data[:keep].splitlines()):
+        try:
+            r = json.loads(line)
+            v = restored(r)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"--resume: line {k + 1} of {part} is not a saved case ({exc}); left as it was") from None
+        want = jobs[k] if k < len(jobs) else None
+        rig = v.family.startswith("rig (")
+        if (want is None or (v.seed, v.twin) != (want[1], want[3]) or rig != (want[0] == "rig")
+                or (want[5] is not None and v.family != want[5])):
+            expected = "no more cases" if want is None else f"seed {want[1]}{' (twin)' if want[3] else ''}"
+            raise ValueError(f"--resume: line {k + 1} of {part} is seed {v.seed}{' (twin)' if v.twin else ''} of "
+                             f"the {'rig' if rig else 'independent'} generator where this run has {expected}: "
+                             "give the first run's --generator, --seed, --cases, --family and --twins")
+        verdicts.append(v)
+    return verdicts, PartFile.resumed(save, keep, label="--save")
+
+
+def restored(r: dict) -> Verdict:
+    """The verdict a ``saved_record`` line holds (``--resume``): as ``judge`` printed it."""
+    t, v, d = r["truth"], r["verdict"], r["discovery"]
+    clipped = set(t.get("clipped") or ())
+    detail = [] if d is None else [
+        f"{f['effect']} at {f['response']} gain {f['gain']:.2f}"
+        + (" (clipped there: true)" if f["effect"] == "clipping" and f["response"] in clipped else "")
+        for f in d["findings"]]
+    return Verdict(int(r["seed"]), r["family"], SYNONYMS.get(t["cause"], t["cause"]), v["named"], v["location"],
+                   bool(v["right"]), int(v["extra"]), v["parameter_error"], v["gain"], float(v["seconds"]), r["info"],
+                   detail, v["baseline_nrmse"], twin=bool(r["twin"]), strength=t["strength"],
+                   noise_floor=v["noise_floor"], sign=v["sign"], through=v["through"])
 
 
 def _print(v: Verdict) -> None:
