@@ -258,7 +258,6 @@ class PartFile:
         self.committed = True
         return self.path
 
-
     @classmethod
     def resumed(cls, path: str | Path, keep: int, label: str = "output", mode: str = "a") -> "PartFile":
         """The ``.part`` a run cut short left beside ``path``, opened to append after its first ``keep``
