@@ -245,6 +245,26 @@ def test_safeio_rules(tmp_path):
     assert (tmp_path / "crashed.mcap.part").read_bytes() == b"unrecovered"
 
 
+def test_a_resumed_part_keeps_its_whole_lines_and_never_replaces_a_finished_file(tmp_path):
+    """PartFile.resumed: a part cut short mid-line goes on after its last whole line and is renamed as any
+    other; a part with its target already there, or no part at all, is refused and nothing changes."""
+    part = tmp_path / "runs.jsonl.part"
+    part.write_text('{"seed": 0}\n{"seed": 1}\n{"se')
+    pf = PartFile.resumed(tmp_path / "runs.jsonl", keep=len('{"seed": 0}\n{"seed": 1}\n'), label="--save")
+    pf.file.write('{"seed": 2}\n')
+    pf.commit()
+    assert (tmp_path / "runs.jsonl").read_text() == '{"seed": 0}\n{"seed": 1}\n{"seed": 2}\n'
+    assert not part.exists()
+    part.write_text('{"seed": 9}\n')
+    with pytest.raises(ValueError, match="exists"):
+        PartFile.resumed(tmp_path / "runs.jsonl", keep=0)
+    assert part.read_text() == '{"seed": 9}\n'
+    assert (tmp_path / "runs.jsonl").read_text().endswith('{"seed": 2}\n')
+    with pytest.raises(ValueError, match="nothing to resume"):
+        PartFile.resumed(tmp_path / "other.jsonl", keep=0)
+    assert not (tmp_path / "other.jsonl.part").exists()
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
