@@ -92,8 +92,8 @@ def test_a_gain_that_is_only_the_refitted_linear_parts_is_not_a_finding(cases):
     borrowed = [x for x in refitted if x.gain > 0.5 and x.own_gain < 0.03]  # gains that are the linear part's
     assert borrowed  # and none is a finding: every finding gains over its own linear part
     assert all(x.own_gain > 0.03 for x in d.findings if x.baseline is not None), d.verdict()
-    # the signed-rank test against that linear part alone, reported beside its gain (not selected on:
-    # the README's stop-75 study), recomputed here with scipy from the linear part's own free runs
+    # the signed-rank test against that linear part alone (``search.over_own_part`` selects on it for every
+    # cause but a stopper), recomputed here with scipy from the linear part's own free runs
     k = max(borrowed, key=lambda x: x.gain)
     prep, split = d.prep, d.split
     scale = np.maximum(prep.measured[split.rows("test")].std(axis=0), 1e-300)
