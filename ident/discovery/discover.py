@@ -984,6 +984,8 @@ def _select(scored: list[Candidate], baseline: Baseline, prep: Prepared, split: 
             and c.location != first.location][:4]
     best2, counts = None, pieces_per_block(split.test, sc.piece)
     for c in rest:
+        if any(el.gain.size != own.model.poles.size for el in c.elements):
+            continue  # fitted with a linear part of another order (``fit_jointly``'s extra mode): no sum
         model = own.model.with_elements(first.elements + c.elements)
         errs, nrmse = block_errors(own, model, prep, split.test, sc.warm, sc.scale, first.output + c.output,
                                    sc.bound, sc.piece)

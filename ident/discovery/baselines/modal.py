@@ -695,6 +695,19 @@ class ModalBaseline(Baseline):
             again = fit_with_forces(start, prep, rows, forces)
             if again[3] < err:
                 poles, C, D, err = again
+        # a mode more where the baseline has fewer structural modes than there are responses, when it cuts
+        # the joint fit's error by the order search's 10 %: a stopper that one beam strikes through the
+        # record leaves no linear resonance of that beam for the order search to see (the equivalent
+        # linearisation smears it), while its underlying mode stands out once the stopper's force is an
+        # input (independent seeds 552 and 587: two beams, one fitted mode, the stopper found only with two).
+        # Not beyond the responses' count: on one response the extra pole split the single resonance of a
+        # Duffing oscillator in two (seed 23, its cubic then named a contact)
+        if np.count_nonzero(self.drivable) < len(prep.names):
+            start = underlying_poles(prep, rows, forces, poles.size + 1)
+            if start is not None:
+                again = fit_with_forces(start, prep, rows, forces)
+                if again[3] < 0.9 * err:
+                    poles, C, D, err = again
         scale = 1.0 / np.maximum(prep.measured[rows].std(axis=0), 1e-300)
         m = poles.size
         new = ModalBaseline(LinearModel(poles, np.ones((1, m), complex), C), self.driving_point, err,
