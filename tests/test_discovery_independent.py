@@ -107,16 +107,15 @@ def test_a_gain_that_is_only_the_refitted_linear_parts_is_not_a_finding(cases):
 
 def test_a_baseline_worse_than_predicting_zero_is_said(cases):
     # a one-mode baseline cannot describe a record with a stopper and blows: the answer says so, with the
-    # number the JSON holds, rather than a bare "nothing found" (checked on the project's own transitions
-    # recording through the command line until stop 58; that a note reaches stdout is test_discovery.py's)
+    # number the JSON holds (checked on the project's own transitions recording through the command line
+    # until stop 58; that a note reaches stdout is test_discovery.py's). Until stop 76 the answer was
+    # "nothing found"; since the joint fit may add the mode the struck stopper hid (stop 77), the stopper
+    # is named at its beam (its gap 35 % small: 0.55 mm where the generator's first-mode equivalent is 0.84)
     _, d, _ = cases[3]
     n0 = d.baseline_test_nrmse
-    assert n0 > 1.0 and d.verdict().startswith("nothing found")
+    assert n0 > 1.0 and np.count_nonzero(d.baseline.drivable) == 1
     assert any(f"worse than predicting zero (NRMSE {n0:.3g})" in note for note in d.notes), d.notes
-
-
-# A known miss since force gains lost their velocity feedthrough (``model.without_feedthrough``): right
-# before, not now (the README's discovery figures)
+    assert np.count_nonzero(d.findings[0].baseline.drivable) == 2
 
 
 def test_a_hidden_contact_comes_without_a_false_second_finding(cases):
@@ -139,9 +138,9 @@ def test_a_linear_mismatch_is_scored_but_not_refined_against_a_baseline_fitted_t
     assert len({x.cause for x in d.candidates if x.refined}) == Settings().max_refined - 1
 
 
-@pytest.mark.xfail(strict=True, reason="seed 3, a baseline worse than zero (1.50): nothing found; the refined "
-                   "contact gains 0.39 over the baseline and -0.001 over its own linear part")
 def test_a_contact_behind_a_baseline_worse_than_zero_is_named(cases):
+    # an expected failure from stop 47 to 76 (nothing found; the refined contact gained 0.39 over the
+    # baseline and -0.001 over its own linear part): named since the joint fit may add the hidden mode
     c, d, _ = cases[3]
     v = judge(c, d, 0.0)
     assert v.right and v.extra == 0, d.verdict()
