@@ -699,7 +699,7 @@ class ModalBaseline(Baseline):
         # the joint fit's error by the order search's 10 %: a stopper that one beam strikes through the
         # record leaves no linear resonance of that beam for the order search to see (the equivalent
         # linearisation smears it), while its underlying mode stands out once the stopper's force is an
-        # input (independent seeds 552 and 587: two beams, one fitted mode, the stopper found only with two).
+        # input (independent seed 552: two beams, one fitted mode, the stopper found only with two).
         # Not beyond the responses' count: on one response the extra pole split the single resonance of a
         # Duffing oscillator in two (seed 23, its cubic then named a contact)
         if np.count_nonzero(self.drivable) < len(prep.names):
