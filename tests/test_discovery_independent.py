@@ -139,7 +139,7 @@ def test_a_linear_mismatch_is_scored_but_not_refined_against_a_baseline_fitted_t
 
 
 def test_a_contact_behind_a_baseline_worse_than_zero_is_named(cases):
-    # an expected failure from stop 47 to 76 (nothing found; the refined contact gained 0.39 over the
+    # an expected failure from `21ca610` to stop 76 (nothing found; the refined contact gained 0.39 over the
     # baseline and -0.001 over its own linear part): named since the joint fit may add the hidden mode
     c, d, _ = cases[3]
     v = judge(c, d, 0.0)
