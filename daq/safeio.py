@@ -226,7 +226,9 @@ class PartFile:
     """
 
     def __init__(self, path: str | Path, inputs: Iterable[str | Path | None] = (), force: bool = False,
-                 label: str = "output", mode: str = "wb", check: bool = True):
+                 label: str = "output", mode: str = "wb", check: bool = True, resume_at: int | None = None):
+        """``resume_at``: open the ``.part`` a run cut short left to append after its first ``resume_at``
+        bytes (what follows them is dropped) instead of creating a new one (:meth:`resumed`)."""
         self.path = Path(path)
         self.part = part_path(self.path)
         self.inputs = list(inputs)
@@ -234,14 +236,28 @@ class PartFile:
         self.label = label
         if check:
             check_outputs([Output(label, self.path), Output(label, self.part, replaceable=False)], self.inputs, force)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            fd = os.open(self.part, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        except FileExistsError:
-            raise ValueError(f"{self.part} exists (an earlier recording cut short?): recover it with "
-                             f"`replay recover {self.part} -o FIXED.mcap` or remove it") from None
+        if resume_at is not None:
+            fd = self._reopened(resume_at)
+        else:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                fd = os.open(self.part, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            except FileExistsError:
+                raise ValueError(f"{self.part} exists (an earlier recording cut short?): recover it with "
+                                 f"`replay recover {self.part} -o FIXED.mcap` or remove it") from None
         self.file = os.fdopen(fd, mode)
         self.committed = False
+
+    def _reopened(self, keep: int) -> int:
+        if self.path.exists() or self.path.is_symlink():
+            raise ValueError(f"{self.path} exists: a finished run is not resumed (give another name)")
+        try:
+            fd = os.open(self.part, os.O_WRONLY)
+        except FileNotFoundError:
+            raise ValueError(f"{self.part} does not exist: nothing to resume") from None
+        os.ftruncate(fd, keep)
+        os.lseek(fd, 0, os.SEEK_END)
+        return fd
 
     def commit(self) -> Path:
         """Flush, fsync, close and rename onto the target; returns the final path."""
@@ -263,20 +279,7 @@ class PartFile:
         """The ``.part`` a run cut short left beside ``path``, opened to append after its first ``keep``
         bytes (what follows them, a line cut off mid-way, is dropped). The target itself must not exist:
         a resumed part is renamed onto it as any other (:meth:`commit`)."""
-        self = cls.__new__(cls)
-        self.path, self.part = Path(path), part_path(path)
-        self.inputs, self.force, self.label = [], False, label
-        if self.path.exists() or self.path.is_symlink():
-            raise ValueError(f"{self.path} exists: a finished run is not resumed (give another name)")
-        try:
-            fd = os.open(self.part, os.O_WRONLY)
-        except FileNotFoundError:
-            raise ValueError(f"{self.part} does not exist: nothing to resume") from None
-        os.ftruncate(fd, keep)
-        os.lseek(fd, 0, os.SEEK_END)
-        self.file = os.fdopen(fd, mode)
-        self.committed = False
-        return self
+        return cls(path, label=label, mode=mode, check=False, resume_at=keep)
 
     def abort(self) -> None:
         """Remove the ``.part`` (for a command that fails before it has recorded anything)."""

@@ -345,11 +345,12 @@ def fit_with_forces(poles0: np.ndarray, prep: Prepared, rows: np.ndarray, forces
     return poles, C, D, _nrmse(fit, prep.measured[rows])
 
 
-def underlying_poles(prep: Prepared, rows: np.ndarray, forces: list[np.ndarray], n_modes: int) -> np.ndarray | None:
-    """Poles of the underlying linear structure: vector fitting of its FRF estimated with the nonlinear
-    forces as extra inputs (``miso_frf``) over ``rows``, on the lines where the excitation carries power
-    in the band; None for a transient excitation (a record of hammer hits: Welch's averages assume a
-    stationary one; its training rows alone need not look impulsive) or too few lines."""
+def underlying_frf(prep: Prepared, rows: np.ndarray,
+                   forces: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The underlying linear structure's FRF (lines, (k, lines)), estimated with the nonlinear forces as
+    extra inputs (``miso_frf``) over ``rows``, on the lines where the excitation carries power in the band;
+    None for a transient excitation (a record of hammer hits: Welch's averages assume a stationary one; its
+    training rows alone need not look impulsive)."""
     if prep.transient or not forces:
         return None
     u = prep.u[rows]
@@ -358,10 +359,18 @@ def underlying_poles(prep: Prepared, rows: np.ndarray, forces: list[np.ndarray],
     lo, hi = prep.band
     inside = (f >= lo) & (f <= hi)
     keep = inside & (puu > 1e-3 * puu[inside].max()) & np.all(np.isfinite(H), axis=0)
-    if keep.sum() < 4 * n_modes:  # as few lines per mode as the first fit's order search allows
+    return f[keep], H[:, keep]
+
+
+def underlying_poles(prep: Prepared, rows: np.ndarray, forces: list[np.ndarray], n_modes: int,
+                     lines: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:
+    """Poles of the underlying linear structure: vector fitting of its FRF (``underlying_frf``, or ``lines``
+    if given: one estimate for several orders); None where there is no such FRF or too few lines."""
+    lines = underlying_frf(prep, rows, forces) if lines is None else lines
+    if lines is None or lines[0].size < 4 * n_modes:  # as few lines per mode as the first fit's order search allows
         return None
     try:
-        poles = vector_fit_poles(f[keep], H[:, keep], n_modes)
+        poles = vector_fit_poles(lines[0], lines[1], n_modes)
     except NUMERIC_FAILURES:
         return None
     return poles if admissible(poles, prep) else None
@@ -690,7 +699,8 @@ class ModalBaseline(Baseline):
         # (independent seed 47, a hardening Duffing oscillator at 26.2 Hz with 1 % damping: 24.6 Hz with
         # 10 %, fit error 0.28): it starts again from the modes of the underlying linear FRF, the forces
         # conditioned out (26.0 Hz, then 26.3 Hz with 1.07 %, fit error 0.02), and keeps the better fit
-        start = underlying_poles(prep, rows, forces, poles.size)
+        lines = underlying_frf(prep, rows, forces)
+        start = underlying_poles(prep, rows, forces, poles.size, lines)
         if start is not None:
             again = fit_with_forces(start, prep, rows, forces)
             if again[3] < err:
@@ -703,7 +713,7 @@ class ModalBaseline(Baseline):
         # Not beyond the responses' count: on one response the extra pole split the single resonance of a
         # Duffing oscillator in two (seed 23, its cubic then named a contact)
         if np.count_nonzero(self.drivable) < len(prep.names):
-            start = underlying_poles(prep, rows, forces, poles.size + 1)
+            start = underlying_poles(prep, rows, forces, poles.size + 1, lines)
             if start is not None:
                 again = fit_with_forces(start, prep, rows, forces)
                 if again[3] < 0.9 * err:
