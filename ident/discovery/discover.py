@@ -9,9 +9,9 @@
                                 │
          characterise (restoring-force curves per location) ── regress every cause at every location
                                 │
-         refine each cause's best location by simulation ── score on held-out blocks ── select
-                                │
-         (a fitted baseline with more modes than responses: regress and refine again on fewer, ``_fewer_modes``)
+         refine each cause's best location by simulation (a fitted baseline with more modes than responses:
+                                │                          regress and refine again on fewer, ``_fewer_modes``)
+         score on held-out blocks ── select
 """
 
 from __future__ import annotations
@@ -871,8 +871,8 @@ def _fewer_modes(baseline: ModalBaseline, prep: Prepared, split: Split) -> Modal
 
     A linear fit to a nonlinear record buys its error down with modes the structure does not have: poles
     beside the true ones that spread a hardening or a stopper's resonance over the amplitudes the record
-    passes through (independent seed 617, two beams and a stopper: modes at 9.16, 9.41 and 11.52 Hz, where
-    the beams have two; seed 697, a cubic: 8.31, 9.04 and 9.08 Hz). Every cause regressed against that
+    passes through (independent seed 617, two beams and a stopper: five poles between 9.1 and 11.4 Hz,
+    where the beams have two modes; seed 697, a cubic: 8.31, 9.04 and 9.08 Hz). Every cause regressed against that
     baseline finds its residual already taken, and nothing is found (617) or the wrong cause (697).
     Searched again on the fewer modes, a cause with its own linear part must still beat the fitted baseline
     on the held-out blocks to be a finding."""
