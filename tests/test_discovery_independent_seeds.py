@@ -237,16 +237,23 @@ def test_a_weaker_hardening_decay_gets_its_cubic_and_its_coefficient():
     assert quadratic and max(x.gain for x in quadratic) < f.gain
 
 
-def _cubic_found(seed: int, rel: float, family: str | None = None):
-    """Discovery on the generator's case ``seed`` (of ``family``, if given), asserted to name its cubic at
-    the right place with no false extra finding and its coefficient per modal mass within ``rel`` of the
-    generator's one-mode equivalent; the discovery and that equivalent."""
+def _named_right(seed: int, family: str | None = None):
+    """Discovery on the generator's case ``seed`` (of ``family``, if given), asserted to name its cause at the
+    right place with no false extra finding; the generated case, the case as measured, the discovery and its
+    verdict."""
     generated = discovery_case(seed, family)
     c = independent_case(seed, generated)
-    eq = generated.truth["equivalent"]
     d = discover(c.measurement)
     v = judge(c, d, 0.0)
     assert v.right and v.extra == 0, d.verdict()
+    return generated, c, d, v
+
+
+def _cubic_found(seed: int, rel: float, family: str | None = None):
+    """``_named_right`` for a cubic, its coefficient per modal mass asserted within ``rel`` of the generator's
+    one-mode equivalent; the discovery and that equivalent."""
+    generated, _, d, _ = _named_right(seed, family)
+    eq = generated.truth["equivalent"]
     assert d.findings[0].parameters["coefficient_per_mass"] == pytest.approx(eq["k3_per_mass"], rel=rel)
     return d, eq
 
@@ -272,11 +279,7 @@ def test_a_drag_the_fitted_linear_part_had_absorbed_is_found_with_its_coefficien
     # its residual was 0.1 /m, and refitting the linear part with it in place kept it there: "nothing
     # found" (gain 0.008). Refits that also start from drags worth a share of the mode's damping
     # (search._strong_starts) release that damping from the linear part and find the generator's drag
-    generated = discovery_case(94)
-    c = independent_case(94, generated)
-    d = discover(c.measurement)
-    v = judge(c, d, 0.0)
-    assert v.right and v.extra == 0, d.verdict()
+    generated, c, d, v = _named_right(94)
     f = d.findings[0]
     # 43.5 /m found, 43.6 /m in the generator (its one-mode equivalent at the tip)
     assert f.parameters["coefficient_per_mass"] == pytest.approx(c.truth["coefficient_per_mass"], rel=0.1)
@@ -299,11 +302,7 @@ def test_a_stopper_struck_throughout_is_found_with_the_beam_mode_its_linearisati
     # the struck beam's resonance is smeared, and every cause refitted with that one mode gained nothing
     # ("nothing found"; the stopper at its true gap too). With the stopper's force as an input the joint
     # fit finds the second mode (its fit error 0.20 -> 0.08), and the stopper is found where it is
-    generated = discovery_case(552)
-    c = independent_case(552, generated)
-    d = discover(c.measurement)
-    v = judge(c, d, 0.0)
-    assert v.right and v.extra == 0, d.verdict()
+    _, c, d, v = _named_right(552)
     f = d.findings[0]
     assert f.parameters["gap"] == pytest.approx(c.truth["gap"], rel=0.05)  # 0.767 mm against 0.770 mm
     assert np.count_nonzero(d.baseline.drivable) == 1
@@ -531,11 +530,7 @@ def test_a_cubic_behind_a_baseline_with_a_mode_too_many_is_found_on_the_beams_tw
     # was named instead of the cubic. Searched again on the two modes the order search takes up to the
     # responses' count, the cubic with its own linear part (8.28 and 8.56 Hz) beats the three-mode baseline
     # on held-out blocks, its coefficient within 2.2 % of the generator's in the mode it acts in
-    generated = discovery_case(697)
-    c = independent_case(697, generated)
-    d = discover(c.measurement)
-    v = judge(c, d, 0.0)
-    assert v.right and v.extra == 0, d.verdict()
+    _, c, d, v = _named_right(697)
     assert np.count_nonzero(d.baseline.drivable) == 3
     f = d.findings[0]
     own = f.baseline
@@ -553,11 +548,8 @@ def test_fewer_modes_that_alone_predict_better_than_the_baseline_make_no_look_al
     # blocks better than the fitted five do; a contact on them gained 0.10 on the baseline and 0.04 on its own
     # linear part, and, taken as a look-alike, it made the true cubic "ambiguous". Such candidates are held
     # back (``FEWER_ALONE``), and the cubic is named
-    generated = discovery_case(42)
-    c = independent_case(42, generated)
-    d = discover(c.measurement)
-    v = judge(c, d, 0.0)
-    assert v.right and v.extra == 0 and not d.ambiguous[0], d.verdict()
+    _, c, d, v = _named_right(42)
+    assert not d.ambiguous[0], d.verdict()
     assert np.count_nonzero(d.baseline.drivable) == 5 and len(d.prep.names) == 4
     held = [k for k in d.candidates if k.note.startswith(D.FEWER_ALONE)]
     assert held and all(k.own_gain < k.gain and k.p_value == 1.0 for k in held)
