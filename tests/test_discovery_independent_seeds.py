@@ -493,6 +493,17 @@ def test_a_struck_tips_sign_under_a_shaken_frame_is_read_below_its_resonance(see
                for n in prep.sign_notes), prep.sign_notes
 
 
+def test_no_tip_is_flipped_by_the_lines_below_its_resonance_in_a_band_above_the_first_mode():
+    # seed 726: base-driven beams whose first modes lie near 14 Hz, analysed in the band the modal fit chose
+    # (75-849 Hz). Below tip 2's lowest resonance there (166 Hz) the lines lie between modes, where Re T < 0
+    # and |T| is 0.09: taken for "below every mode", they had flipped a tip the generator mounted right
+    generated = discovery_case(726)
+    m = independent_case(726, generated).measurement
+    prep = prepare(m, band=(75.5, 849.1))
+    assert prep.signs[1] == generated.truth["signs"]["tip2"] * generated.truth["signs"][m.excitation.name] == 1
+    assert not any(n.startswith("tip2") for n in prep.sign_notes), prep.sign_notes
+
+
 def test_reciprocity_through_the_response_that_explains_most_finds_a_chains_drag():
     # seed 50: a chain of six masses pushed at its second, a drag between its third and fourth, driven about
     # its lowest modes: five masses read as the driving point, the signs take the sixth, and through it the
