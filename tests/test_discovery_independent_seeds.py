@@ -430,6 +430,9 @@ def test_damping_ratios_are_capped_below_critical():
     assert np.array_equal(q.real, p.real) and q[0] == p[0] and q[1] == p[1]
 
 
+@pytest.mark.xfail(strict=True, reason="seed 58's drift pole came from both tips read against the frame; with their "
+                   "signs right (stop 79, signals._below_resonance) the fit keeps no pole below the band, and this "
+                   "check needs another record that has one")
 def test_a_drift_pole_below_the_band_stays_a_pair_and_the_free_runs_start_right():
     # seed 58 hides nothing (base-driven rig, odd multisine, 1 kHz). The modal fit keeps a 0.32 Hz pole for
     # the drift of integrated accelerations; at zeta = 1 its pair was one real pole twice, the residues that
