@@ -584,18 +584,15 @@ def _signs(m: Measurement, band: tuple[float, float]
             resp = np.abs(T - 1)
             peak = _lowest_peak(f[sel], resp)
             # judged at a resonance the input sweeps through (a peak with driven lines on both sides, the
-            # relative motion near 90 degrees); a single tone says nothing about the sign
+            # relative motion near 90 degrees), a single tone saying nothing; else below it (``_below_resonance``)
             if 0 < peak < resp.size - 1 and abs(np.imag(T[peak] - 1)) > 0.7 * resp[peak]:
-                if np.imag(T[peak]) > 0:
-                    signs[i] = -1
-                    notes.append(f"{ch.name}: flipped (Im of its transmissibility is positive at the lowest "
-                                 f"resonance, {f[sel][peak]:.1f} Hz)")
-                continue
-            below = _below_resonance(f[sel], T, puu[sel], f[sel][peak])
-            if below < 0:
+                flip, why = np.imag(T[peak]) > 0, "Im of its transmissibility is positive at the lowest"
+            else:
+                flip = _below_resonance(f[sel], T, puu[sel], f[sel][peak]) < 0
+                why = "Re of its transmissibility is negative below its lowest"
+            if flip:
                 signs[i] = -1
-                notes.append(f"{ch.name}: flipped (Re of its transmissibility is negative below its lowest "
-                             f"resonance, {f[sel][peak]:.1f} Hz)")
+                notes.append(f"{ch.name}: flipped ({why} resonance, {f[sel][peak]:.1f} Hz)")
             continue
         if m.excitation.kind != "force":
             continue
