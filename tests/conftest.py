@@ -21,20 +21,22 @@ def pytest_configure(config):
         subprocess.run([exe, "analytics", "disable"], capture_output=True, timeout=60)
 
 
-# The files that take longest, longest first (per-file sums of ``--durations`` on a 2-core host, stop 55:
-# about 180, 135, 110, 110, 90 s for the first five). ``--dist loadfile`` with ``--no-loadscope-reorder``
-# (pyproject) hands whole files to the workers in collection order, so these start at once and the short
-# files fill in at the end; xdist's default order (files with the most tests first) started the three
-# discovery files of nine tests each in the middle of the run. Files not listed keep their order.
-# The three files that start are not two discovery files: on a fresh clone numba's cache is empty, and two
-# workers that start on discovery both compile its kernels at once. One starts on discovery, one on the live
-# pipeline's kernels (``replay``), one on the paper's study (``cli``: SINDy's); each compiles its own and later
-# loads the others' from the cache.
+# The files that take longest, longest first (per-file sums of ``--durations`` on a 2-core host, stop 81:
+# the independent discovery cases with a test of their own 463 s in one file, the rest 144 s and less; that
+# file alone set the run's 473 s, so it is three files now, one theme each, of 145-175 s). ``--dist loadfile``
+# with ``--no-loadscope-reorder`` (pyproject) hands whole files to the workers in collection order, so these
+# start at once and the short files fill in at the end; xdist's default order (files with the most tests
+# first) started the three discovery files of nine tests each in the middle of the run. Files not listed keep
+# their order. The three files that start are not two discovery files: on a fresh clone numba's cache is
+# empty, and two workers that start on discovery both compile its kernels at once. One starts on discovery,
+# one on the live pipeline's kernels (``replay``), one on the paper's study (``cli``: SINDy's); each compiles
+# its own and later loads the others' from the cache.
 LONGEST_FIRST = ("test_discovery_independent_seeds.py", "test_replay.py", "test_cli.py",
-                 "test_discovery_independent.py", "test_discovery_rates.py", "test_discovery.py",
-                 "test_discovery_parts.py", "test_bounded_inputs.py", "test_record.py", "test_regimes.py",
-                 "test_protocol.py", "test_modal_fit_independent.py", "test_engine.py", "test_duffing.py",
-                 "test_batch.py", "test_viewer_blueprint.py")
+                 "test_discovery_independent_transients.py", "test_discovery_independent_lookalikes.py",
+                 "test_discovery_parts.py", "test_discovery_independent.py", "test_discovery_rates.py",
+                 "test_discovery.py", "test_independent_generator.py", "test_record.py", "test_bounded_inputs.py",
+                 "test_regimes.py", "test_protocol.py", "test_modal_fit_independent.py", "test_engine.py",
+                 "test_duffing.py", "test_batch.py", "test_viewer_blueprint.py")
 
 
 def pytest_collection_modifyitems(items):

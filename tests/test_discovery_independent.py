@@ -9,8 +9,9 @@ under base excitation at 2 kHz; seed 63 a force-driven rig with nothing hidden a
 accelerometer clips); seed 23 a force-driven Duffing oscillator with displacement output under an odd
 multisine at 610 Hz (26.8 Hz, 3.6 % damping, hardening); seed 3 a two-sided contact at beam 1 under base
 excitation at 1 kHz with two unmeasured blows, whose one-mode baseline predicts worse than zero. Cases
-with a test of their own are in ``test_discovery_independent_seeds.py`` (a separate file, so that the two
-halves can run on two workers).
+with a test of their own are in ``test_discovery_independent_seeds.py``,
+``test_discovery_independent_transients.py`` and ``test_discovery_independent_lookalikes.py`` (separate
+files, one theme each, so that they run on separate workers).
 """
 
 import importlib
