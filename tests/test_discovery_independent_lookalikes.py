@@ -100,16 +100,19 @@ def test_reciprocity_through_the_response_that_explains_most_finds_a_chains_drag
     # seed 50: a chain of six masses pushed at its second, a drag between its third and fourth, driven about
     # its lowest modes: five masses read as the driving point, the signs take the sixth, and through it the
     # drag was "ambiguous" beside a false cubic. Through the second mass, the driven one, a force surface
-    # explains the most of the training residual, and the drag is found where it is
+    # explains the most of the training residual, and the drag is found where it is. The answer is settled
+    # before any refinement by simulation (measured at stop 83: the same finding, gain 0.39 and coefficient
+    # 6 % off with the four refinements or without), so none is run here: 44 s -> 33 s alone
     case = independent_case(50)
-    d = discover(case.measurement)
+    d = discover(case.measurement, settings=search.Settings(max_refined=0))
     v = judge(case, d, 0.0)
     assert d.prep.names[d.prep.driving_point] != case.driven
     assert d.prep.names[d.baseline.driving_point] == case.driven
     assert any(n.startswith(f"the modal baseline's reciprocity taken through {case.driven}") for n in d.notes)
     assert v.right and v.extra == 0, d.verdict()
-    # the drag's coefficient, in N s^2/m^2 through the chain's masses: 41 % off the generator's element
-    assert v.parameter_error < 0.5
+    # the drag's coefficient, in N s^2/m^2 through the chain's masses: 6 % off the generator's element
+    # (stop 83, with or without refinements; the test was written at 41 %, at `7a2daba`)
+    assert v.parameter_error < 0.15
 
 
 def test_a_refinement_ends_no_worse_than_the_cause_as_regressed():
