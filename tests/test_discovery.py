@@ -11,6 +11,7 @@ import os
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -25,8 +26,8 @@ from ident.cli.discover import stage_printer
 from ident.cli.main import main as ident_main
 from ident.discovery import Channel, Measurement, discover
 from ident.discovery.baselines.rig import RigBaseline
-from ident.discovery.catalogue import CAUSES, CUBIC, law_parameters
-from ident.discovery.discover import findable
+from ident.discovery.catalogue import CAUSES, CUBIC, describing_stiffness, force_series, law_parameters
+from ident.discovery.discover import engaged_throughout, findable
 from ident.discovery.model import Element
 from ident.discovery.search import Candidate, Scoring, score
 from ident.discovery.signals import modal_band, prepare
@@ -352,3 +353,32 @@ def test_a_linear_mismatch_is_no_finding_against_a_model_fitted_to_the_same_reco
     cubic = Candidate("cubic_stiffness", "tip1", {}, gain=0.04, p_value=0.01, test_nrmse=0.03)
     assert findable([mismatch, cubic], fitted_here=True) == [cubic]
     assert findable([mismatch, cubic], fitted_here=False) == [mismatch, cubic]
+
+
+def test_a_two_sided_stopper_engaged_through_nearly_all_the_motion_is_a_spring_and_no_finding():
+    """Independent seed 116 (nothing hidden) had a two-sided contact between the tips named, its gap 4 % of
+    the largest displacement there (7.9e-5 of 1.89e-3 m) at 0.2 % of the mode's stiffness. On a sinusoid of
+    that amplitude such a stopper's force is a spring: least squares on the displacement takes the
+    describing function's stiffness, k (1 - 2/pi (asin r + r sqrt(1 - r^2))) with r = g / A, and leaves a
+    small share of the force. A one-sided stopper at the same gap is a bilinear spring and stays a
+    candidate, as does a two-sided one at the gaps true contacts were found at (0.41-0.98 of the range)."""
+    k, gap, top = 12.09, 7.94e-5, 1.889e-3
+    z = top * np.sin(np.linspace(0.0, 2 * np.pi, 20001))
+    contact = CAUSES["contact"]
+    f = k * force_series(contact.code, law_parameters(contact, {"gap": gap, "side": "both"}), z, np.zeros_like(z))
+    slope = float(z @ f / (z @ z))
+    r = gap / top
+    assert slope == pytest.approx(k * (1 - 2 / np.pi * (np.arcsin(r) + r * np.sqrt(1 - r * r))), rel=1e-3)
+    assert slope == pytest.approx(describing_stiffness("contact", {"stiffness_per_mass": k, "gap": gap,
+                                                                   "side": "both"}, top), rel=1e-3)
+    assert np.std(f - slope * z) < 0.05 * np.std(f)  # 2.6 %: the step k g is all that is not a spring
+    char = {"tip1-tip2": {"displacement": list(np.linspace(-top, top, 7))}}
+    spring = Candidate("contact", "tip1-tip2", {"stiffness_per_mass": k, "gap": gap, "side": "both"},
+                       gain=0.16, p_value=3e-10, test_nrmse=0.035)
+    one_side = replace(spring, parameters={**spring.parameters, "side": "positive"})
+    wide = replace(spring, parameters={**spring.parameters, "gap": 0.41 * top})
+    cubic = Candidate("cubic_stiffness", "tip1-tip2", {}, gain=0.15, p_value=1e-9, test_nrmse=0.036)
+    assert engaged_throughout(spring, char) and not engaged_throughout(one_side, char)
+    assert not engaged_throughout(wide, char) and not engaged_throughout(cubic, char)
+    assert findable([spring, one_side, wide, cubic], True, char) == [one_side, wide, cubic]
+    assert findable([spring, cubic], True) == [spring, cubic]  # no characterisation: nothing to judge by
