@@ -24,7 +24,7 @@ from oscillator import linear_under_random_force
 from ident.cli.bench_discovery import Case, Verdict, by_floor, by_strength, judge, report, twin_report
 from ident.cli.discover import stage_printer
 from ident.cli.main import main as ident_main
-from ident.discovery import Channel, Measurement, discover
+from ident.discovery import Channel, Measurement, Settings, discover
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CUBIC, describing_stiffness, force_series, law_parameters
 from ident.discovery.discover import engaged_throughout, findable
@@ -34,6 +34,8 @@ from ident.discovery.signals import modal_band, prepare
 from ident.discovery.split import interleaved
 
 ROOT = Path(__file__).resolve().parents[1]
+
+D = sys.modules["ident.discovery.discover"]  # the module: the package exports its function by that name
 
 
 def _rig_measurement(c):
@@ -382,3 +384,9 @@ def test_a_two_sided_stopper_engaged_through_nearly_all_the_motion_is_a_spring_a
     assert not engaged_throughout(wide, char) and not engaged_throughout(cubic, char)
     assert findable([spring, one_side, wide, cubic], True, char) == [one_side, wide, cubic]
     assert findable([spring, cubic], True) == [spring, cubic]  # no characterisation: nothing to judge by
+    # said in a note where it would have led, with the share of the range its gap is
+    note = D._engaged_aside([spring, cubic], [], char, Settings())
+    assert note == ["contact at tip1-tip2 (held-out gain 0.16) was set aside: its gap is 4% of the largest "
+                    "displacement there, so it is engaged through nearly all of the motion, a linear spring more "
+                    "than a stopper"]
+    assert D._engaged_aside([spring, cubic], [replace(cubic, gain=0.2)], char, Settings()) == []

@@ -805,11 +805,15 @@ def engaged_throughout(c: Candidate, char: dict) -> bool:
     a bilinear spring, as nonlinear as a stopper gets."""
     if c.cause != "contact" or c.parameters.get("side") != "both":
         return False
-    span = char.get(c.location, {}).get("displacement")
-    if not span:
-        return False
-    largest = max(abs(span[0]), abs(span[-1]))
+    largest = _largest_displacement(char, c.location)
     return largest > 0 and c.parameters.get("gap", np.inf) < ENGAGED_GAP * largest
+
+
+def _largest_displacement(char: dict, location: str) -> float:
+    """The largest |displacement| at a location over the training blocks (the characterisation's range; 0
+    where it has none)."""
+    span = char.get(location, {}).get("displacement")
+    return max(abs(span[0]), abs(span[-1])) if span else 0.0
 
 
 def findable(scored: list[Candidate], fitted_here: bool, char: dict | None = None) -> list[Candidate]:
@@ -1080,9 +1084,8 @@ def _engaged_aside(scored: list[Candidate], findings: list[Candidate], char: dic
     best = max(aside, key=lambda c: c.gain)
     if findings and best.gain <= findings[0].gain:
         return []
-    largest = max(abs(v) for v in (char[best.location]["displacement"][0], char[best.location]["displacement"][-1]))
     return [f"{best.label} (held-out gain {best.gain:.2f}) was set aside: its gap is "
-            f"{best.parameters['gap'] / largest:.0%} of the largest displacement there, so it is engaged through "
+            f"{best.parameters['gap'] / _largest_displacement(char, best.location):.0%} of the largest displacement there, so it is engaged through "
             "nearly all of the motion, a linear spring more than a stopper"]
 
 
