@@ -1084,9 +1084,10 @@ def _engaged_aside(scored: list[Candidate], findings: list[Candidate], char: dic
     best = max(aside, key=lambda c: c.gain)
     if findings and best.gain <= findings[0].gain:
         return []
-    return [f"{best.label} (held-out gain {best.gain:.2f}) was set aside: its gap is "
-            f"{best.parameters['gap'] / _largest_displacement(char, best.location):.0%} of the largest displacement there, so it is engaged through "
-            "nearly all of the motion, a linear spring more than a stopper"]
+    share = best.parameters["gap"] / _largest_displacement(char, best.location)
+    return [f"{best.label} (held-out gain {best.gain:.2f}) was set aside: its gap is {share:.0%} of the largest "
+            "displacement there, so it is engaged through nearly all of the motion, a linear spring more than a "
+            "stopper"]
 
 
 def _set_aside(scored: list[Candidate], findings: list[Candidate]) -> list[str]:
