@@ -2,6 +2,12 @@
 
 import os
 
+# One BLAS thread a worker: the suite runs three workers on two cores (pyproject's ``-n 3``), and OpenBLAS's
+# threads wait for each other by spinning, so two a worker burned the cores' time on waiting (stop 84, one run
+# each on a 2-core host: 19.3 -> 16.3 CPU-minutes, 621 -> 522 s; the paper study's setup 55 -> 22 s). Discovery
+# holds itself to one thread already (``discover``); the commands the tests start inherit this.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 from daq import NUMPY_SIMD_PIN  # before numpy: holds it to its AVX2 kernels, as the commands do (daq/__init__.py)
 
 os.environ.setdefault("NPY_DISABLE_CPU_FEATURES", NUMPY_SIMD_PIN)  # (daq's import has set it already)
