@@ -3,9 +3,10 @@
 import os
 
 # One BLAS thread a worker: the suite runs three workers on two cores (pyproject's ``-n 3``), and OpenBLAS's
-# threads wait for each other by spinning, so two a worker burned the cores' time on waiting (stop 84, one run
-# each on a 2-core host: 19.3 -> 16.3 CPU-minutes, 621 -> 522 s; the paper study's setup 55 -> 22 s). Discovery
-# holds itself to one thread already (``discover``); the commands the tests start inherit this.
+# threads wait for each other by spinning (stop 84, a 2-core host, numba's cache warm, one run each: two threads
+# a worker 632 s and 20.1 CPU-minutes, one 522 s and 16.3; the paper study's setup 33 -> 22 s; runs of the same
+# code on that host varied by 10 % or more, so this is likely, not settled). Discovery holds itself to one
+# thread already (``discover``); the commands the tests start inherit this.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from daq import NUMPY_SIMD_PIN  # before numpy: holds it to its AVX2 kernels, as the commands do (daq/__init__.py)
