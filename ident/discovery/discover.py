@@ -32,10 +32,10 @@ from .catalogue import CAUSES, describing_stiffness
 from .characterise import characterise
 from .model import NUMERIC_FAILURES
 from .result import Discovery, options, softens
-from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, block_errors, busiest,
-                     choose, clipped_ranges, clipping_candidates, clustered_p, compensation, gain_candidates,
-                     offset_findings, paired_p, pieces_per_block, predict, refine, regress, regressions, same_sensors,
-                     score, significant, simulation_bound, spring_damper_responses, train_error)
+from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, beats_baseline,
+                     block_errors, busiest, choose, clipped_ranges, clipping_candidates, clustered_p, compensation,
+                     gain_candidates, offset_findings, paired_p, pieces_per_block, predict, refine, regress,
+                     regressions, same_sensors, score, significant, simulation_bound, spring_damper_responses, train_error)
 from .signals import (HIT_RESPONSE, ORDER, UNDRIVEN_SHARE, Channel, Dropout, Measurement, Prepared, below_band,
                       convert, dropouts, first_family, impulsive, modal_band, preliminary_band, prepare, span_text,
                       undriven, within_budget)
@@ -708,9 +708,10 @@ def _settle_by_backbone(first: Candidate, alike: list[Candidate], scored: list[C
     """A hammer-hit record rings down through every amplitude, and its free decays' backbone (``backbone``)
     shows the stiffness law directly: a cubic's glide grows with amplitude^2, a quadratic stiffness's with
     amplitude, a stopper's starts at its gap. Where the first finding and the candidates at its response that
-    beat the baseline (``_beats_baseline``), over their own refitted linear part or not (independent seed 749's
-    cubic: 0.067 at p = 1e-4 over the baseline, p = 0.16 over its own part, where a quadratic stiffness was
-    named at 0.049), include stiffness laws of two causes or more, each candidate's shape (its describing
+    beat the baseline (``search.beats_baseline``), over their own refitted linear part or not (a linear part
+    refitted to a decay takes up the mean of its glide; independent seed 749's cubic: 0.067 at p = 1e-4 over
+    the baseline, p = 0.16 over its own part, where a quadratic stiffness was named at 0.049), include
+    stiffness laws of two causes or more, each candidate's shape (its describing
     stiffness at the backbone's amplitudes, ``catalogue.describing_stiffness``, its scale free) is fitted
     to the measured backbone; a cause whose shape fits ``backbone.CLEAR`` times worse than the best is set
     aside, the first finding too (then the best-gaining candidate of a cause that fits takes its place).
@@ -723,7 +724,7 @@ def _settle_by_backbone(first: Candidate, alike: list[Candidate], scored: list[C
     probe = np.ones(1)
     stiff = lambda c: describing_stiffness(c.cause, c.parameters, probe) is not None  # noqa: E731
     here, seen = [], set()
-    for c in [first] + alike + [c for c in scored if _beats_baseline(c, settings)]:
+    for c in [first] + alike + [c for c in scored if beats_baseline(c, settings)]:
         if c.location == first.location and id(c) not in seen and stiff(c):
             here.append(c)
             seen.add(id(c))
@@ -759,15 +760,6 @@ def _settle_by_backbone(first: Candidate, alike: list[Candidate], scored: list[C
     reason = (f"the free decays' backbone at {first.location} ({bb.mode_hz:.1f} Hz) against each stiffness law's "
               f"shape (RMS off its best line: {shapes}): {', '.join(sorted(out))} set aside")
     return first, [c for c in kept if c is not first], reason
-
-
-def _beats_baseline(c: Candidate, settings: Settings) -> bool:
-    """Does a candidate beat the baseline on the held-out blocks: below predicting zero, by the gain floor and
-    by the paired test (``search.significant`` without its test over the candidate's own linear part)? What
-    a law must do to be weighed by a hammer record's backbone: a linear part refitted to a decay takes up the
-    mean of its glide, and the test against it is weak where the backbone is not."""
-    return (np.isfinite(c.test_nrmse) and c.test_nrmse < 1.0 and c.gain > settings.gain_floor
-            and c.p_value < settings.alpha and not (compensation(c) and c.own_gain < c.gain))
 
 
 SOFTENING_SHARE = 0.75  # a softening cubic's joint look-alike gains at least this share of the cubic's gain

@@ -898,10 +898,15 @@ def significant(c: Candidate, settings: Settings) -> bool:
     fitted to the same record, ``discover.findable``), and the cause rides on top of a linear correction
     (the softening family's seed 17, nothing hidden: the spring and damper alone 0.0512 against the
     baseline's 0.0549, a Coulomb friction on top 0.0485, named at p = 6e-39 before this rule)."""
+    return beats_baseline(c, settings) and (over_own_part(c, settings.gain_floor, settings.alpha)
+                                            or c.own_gain_trained >= ACTS_IN_TRAINING)
+
+
+def beats_baseline(c: Candidate, settings: Settings) -> bool:
+    """``significant`` without the test over the candidate's own linear part: below predicting zero, by the
+    gain floor and the paired test over the baseline, and, compensated, better than its spring and damper."""
     return (np.isfinite(c.test_nrmse) and c.test_nrmse < 1.0 and c.gain > settings.gain_floor
-            and (over_own_part(c, settings.gain_floor, settings.alpha) or c.own_gain_trained >= ACTS_IN_TRAINING)
-            and c.p_value < settings.alpha
-            and not (compensation(c) and c.own_gain < c.gain))
+            and c.p_value < settings.alpha and not (compensation(c) and c.own_gain < c.gain))
 
 
 def beats(a: Candidate, b: Candidate, settings: Settings) -> bool:
