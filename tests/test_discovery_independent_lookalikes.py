@@ -22,6 +22,7 @@ from ident.discovery.search import block_errors, compensation, simulation_bound
 D = sys.modules["ident.discovery.discover"]  # the module: the package exports its function by that name
 
 
+@pytest.mark.long
 def test_a_twin_without_its_effect_gets_no_finding_from_a_linear_refit():
     # independent seed 48's twin: the base-driven rig of a Coulomb friction case, run without the friction,
     # so a linear record. Its first modal fit (in the preliminary band, 2.7-16 Hz) keeps an overdamped
@@ -96,6 +97,7 @@ def test_a_friction_three_times_better_at_its_own_beam_is_named_there_not_ambigu
     assert f.parameters["force_per_mass"] == pytest.approx(c.truth["force_per_mass"], rel=0.5)
 
 
+@pytest.mark.long
 def test_reciprocity_through_the_response_that_explains_most_finds_a_chains_drag():
     # seed 50: a chain of six masses pushed at its second, a drag between its third and fourth, driven about
     # its lowest modes: five masses read as the driving point, the signs take the sixth, and through it the

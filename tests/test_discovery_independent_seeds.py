@@ -113,6 +113,7 @@ def test_a_stopper_struck_throughout_is_found_with_the_beam_mode_its_linearisati
     assert light == pytest.approx(modes, rel=0.03)
 
 
+@pytest.mark.long
 def test_a_cubic_behind_a_baseline_with_a_mode_too_many_is_found_on_the_beams_two():
     # independent seed 697 (first run at stop 77, fresh): a base-driven rig whose beams' first modes lie at
     # 8.28 and 8.54 Hz, a cubic spring at tip 2. The modal fit follows the hardening with a third mode
@@ -175,6 +176,7 @@ def test_damping_ratios_are_capped_below_critical():
     assert np.array_equal(q.real, p.real) and q[0] == p[0] and q[1] == p[1]
 
 
+@pytest.mark.long
 def test_an_overdamped_pair_in_the_first_fit_is_brought_below_critical_and_its_residues_fitted_again(monkeypatch):
     # seed 28 hides nothing: a chain of masses, band 1.9-90 Hz. The first modal fit ends with two poles at
     # zeta = 1 (30.1 and 26.6 Hz): each pair one real pole twice, the two columns of the design nearly the
