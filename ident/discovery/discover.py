@@ -36,9 +36,9 @@ from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline
                      block_errors, busiest, choose, clipped_ranges, clipping_candidates, clustered_p, compensation,
                      gain_candidates, offset_findings, paired_p, pieces_per_block, predict, refine, regress,
                      regressions, same_sensors, score, significant, simulation_bound, spring_damper_responses, train_error)
-from .signals import (HIT_RESPONSE, ORDER, UNDRIVEN_SHARE, Channel, Dropout, Measurement, Prepared, below_band,
-                      convert, dropouts, first_family, impulsive, modal_band, preliminary_band, prepare, span_text,
-                      undriven, within_budget)
+from .signals import (HIT_RESPONSE, ORDER, UNDRIVEN_SHARE, Channel, Dropout, Measurement, Prepared, above_band,
+                      below_band, convert, dropouts, first_family, impulsive, modal_band, preliminary_band, prepare,
+                      span_text, undriven, within_budget)
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
 
@@ -507,6 +507,9 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
             say(line)
         say(f"first fit: {poles0.size} lightly damped mode{'' if poles0.size == 1 else 's'}, band {band[0]:.3g}-"
             f"{band[1]:.3g} Hz; fitting there again")
+    for line in above_band(m, prep.band):  # either baseline: the data alone say it
+        notes.append(line)
+        say(line)
     f_min = float(prep.band[0]) / 0.4
     split = _split(prep, train, test)
     # a dropout's blocks out of the baseline's fit, the scoring and the causes' training. The first fit, which
