@@ -162,7 +162,7 @@ def test_own_example_recording_with_its_own_config_says_nothing_found(tmp_path):
     assert "\nnote: left out blocks [5, 6, 7]: transients the measured input cannot produce at 2.96 s" in out.stdout
     # a blow at 3 s puts beam 1 on its stoppers (recordings/README.md), not beam 2: tip 1 rings above the band
     # where the base's shaking has no power (the blow and the impacts, which the note does not tell apart), tip 2
-    # does not (``signals.above_band``; 40 % of tip 1's power measured)
+    # does not (``signals.above_band``, on the blocks that stay; 36 % of tip 1's power measured)
     assert "\nnote: tip1: " in out.stdout and "above the analysed band's top (50.7 Hz)" in out.stdout
     assert "\nnote: tip2: " not in out.stdout
     js = json.loads((tmp_path / "d.json").read_text())

@@ -941,6 +941,40 @@ def test_motion_above_the_band_where_the_input_has_none_is_noted_at_the_response
     assert above_band(loud, band) == []
 
 
+def test_a_blow_nobody_measured_rings_above_the_band_and_the_note_reads_the_blocks_that_stay():
+    # two modes (15 Hz at 1 %, 150 Hz at 2 % damping, each integrated by RK4 apart from ``ident``) under the
+    # multisine force of 5-25 Hz above, struck at 10 s by a 3 ms half-sine blow the force sensor did not record
+    # (200 times the force's standard deviation): the blow rings the 150 Hz mode, above the band a model of the
+    # first explains (6-67.5 Hz), where the force has no power. Read whole, more than ``ABOVE_SHARE`` of the
+    # response's power lies there (the note named such blows on 5 of the independent generator's 143 records
+    # with nothing hidden, seeds 0-899); read on the blocks discovery keeps once it has left the blow's out,
+    # none (``_discover`` passes them)
+    fs, n = 1000.0, 20000
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(3)
+    force = sum(np.cos(2 * np.pi * fl * t + rng.uniform(0, 2 * np.pi)) for fl in np.arange(5.0, 25.01, 0.5))
+    blow = np.zeros(n)
+    blow[10000:10003] = 200 * force.std() * np.sin(np.pi * (np.arange(3) + 0.5) / 3)
+    acc = np.zeros(n)
+    for f_hz, zeta in ((15.0, 0.01), (150.0, 0.02)):
+        def mode(x, v, u, w=2 * np.pi * f_hz, zeta=zeta):
+            return u - 2 * zeta * w * v - w * w * x
+
+        acc += mode(*rk4(force + blow, fs, mode), force + blow)
+    acc += 0.01 * acc[:9000].std() * rng.standard_normal(n)
+    band = modal_band(np.array([15.0]), fs, n)
+    m = Measurement(fs, Channel("force", "force", force), (Channel("x", "acceleration", acc),))
+    whole, after = _share_above(acc, fs, band[1]), _share_above(acc[13000:19000], fs, band[1])
+    assert whole > ABOVE_SHARE > 0.01 > after  # measured: 0.24 and 0.0001
+    (note,) = above_band(m, band)
+    # (Welch's windows weigh a transient by where it falls in them: 30 % noted, 24 % by one transform)
+    assert note.startswith("x: ") and float(note.split(" % ")[0].split(": ")[1]) == pytest.approx(100 * whole, rel=0.3)
+    kept = [slice(k, k + 1000) for k in range(1000, 19000, 1000) if not 9000 <= k < 13000]  # 9-13 s left out
+    assert above_band(m, band, keep=kept) == []
+    # the blocks read are those given: the blow's alone is noted again
+    assert len(above_band(m, band, keep=[slice(9000, 10000), slice(10000, 11000)])) == 1
+
+
 def test_a_clipped_excitation_is_named_and_a_synthesised_sine_is_not():
     # a one-mode oscillator (15 Hz, 2 % damping) driven by a random force, integrated by scipy (lsim); the
     # force as its sensor recorded it is clipped at 2 standard deviations (4.6 % of the samples). The

@@ -507,9 +507,6 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
             say(line)
         say(f"first fit: {poles0.size} lightly damped mode{'' if poles0.size == 1 else 's'}, band {band[0]:.3g}-"
             f"{band[1]:.3g} Hz; fitting there again")
-    for line in above_band(m, prep.band):  # either baseline: the data alone say it
-        notes.append(line)
-        say(line)
     f_min = float(prep.band[0]) / 0.4
     split = _split(prep, train, test)
     # a dropout's blocks out of the baseline's fit, the scoring and the causes' training. The first fit, which
@@ -571,6 +568,11 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
                 notes.append("the modal baseline fitted again with a free response from each blow on")
         else:
             onsets = []
+    # either baseline: the data alone say it, on the blocks that stay (a blow nobody measured rings high too)
+    kept = split.train + split.test if split.excluded else None
+    for line in above_band(m, prep.band, keep=sorted(kept, key=lambda b: b.start) if kept else None):
+        notes.append(line)
+        say(line)
     test_rows = split.rows("test")
     scale = np.maximum(prep.measured[test_rows].std(axis=0), 1e-300)
     piece = max(16, int(PIECE_PERIODS * prep.fs_hz / f_min))
