@@ -503,7 +503,10 @@ def dropouts(m: Measurement, band: tuple[float, float]) -> list[Dropout]:
     return out
 
 
-def modal_band(frequencies_hz: np.ndarray, fs_hz: float, n: int, harmonics: float = 4.5) -> tuple[float, float]:
+HARMONICS = 4.5  # the band's top, in multiples of the highest mode (``modal_band``)
+
+
+def modal_band(frequencies_hz: np.ndarray, fs_hz: float, n: int, harmonics: float = HARMONICS) -> tuple[float, float]:
     """The band a model with these modes explains: from 0.4 x the lowest mode (at least ``MIN_CYCLES``
     periods in the record) to ``harmonics`` x the highest (the drive's 3rd and 4th harmonics, which a
     nonlinearity makes, stay in), below 0.45 fs."""
