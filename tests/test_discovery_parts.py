@@ -903,6 +903,25 @@ def _share_above(y: np.ndarray, fs: float, top: float) -> float:
     return float(spec[f > top].sum() / spec[1:].sum())
 
 
+def _multisine(fs: float = 1000.0, n: int = 20000):
+    """The force the oscillators below are driven by (20 s at 1 kHz, lines 5-25 Hz 0.5 Hz apart, random phases),
+    and the generator that drew it, for their noise."""
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(3)
+    return sum(np.cos(2 * np.pi * fl * t + rng.uniform(0, 2 * np.pi)) for fl in np.arange(5.0, 25.01, 0.5)), rng
+
+
+def _mode(f_hz: float, zeta: float):
+    """A one-mode oscillator's acceleration per unit mass, (x, v, u) -> a, for ``rk4``."""
+    w = 2 * np.pi * f_hz
+    return lambda x, v, u: u - 2 * zeta * w * v - w * w * x
+
+
+def _struck(free, k: float, gap: float):
+    """``free`` with a two-sided stopper of stiffness ``k`` (per unit mass) beyond ``gap``."""
+    return lambda x, v, u: free(x, v, u) - k * np.sign(x) * np.maximum(np.abs(x) - gap, 0.0)
+
+
 def test_motion_above_the_band_where_the_input_has_none_is_noted_at_the_response_that_strikes():
     # two one-mode oscillators (15 Hz, 1 % damping) under one multisine force of 5-25 Hz, integrated apart from
     # ``ident`` (RK4); the band a model of that mode explains is 6-67.5 Hz (``modal_band``: 4.5 x the mode). The
@@ -912,23 +931,11 @@ def test_motion_above_the_band_where_the_input_has_none_is_noted_at_the_response
     # (measured: 0.01 % and 24 % of the two accelerations' power; the independent generator's strong stoppers,
     # seeds 928, 967 and 993, rang there at 9-49 %, and each was "nothing" or a false finding)
     fs, n = 1000.0, 20000
-    t = np.arange(n) / fs
-    rng = np.random.default_rng(3)
-    force = sum(np.cos(2 * np.pi * fl * t + rng.uniform(0, 2 * np.pi)) for fl in np.arange(5.0, 25.01, 0.5))
-    w, zeta = 2 * np.pi * 15.0, 0.01
-
-    def free(x, v, u):
-        return u - 2 * zeta * w * v - w * w * x
-
+    force, rng = _multisine(fs, n)
+    free = _mode(15.0, 0.01)
     x, v = rk4(force, fs, free)
-    gap = 0.6 * float(np.max(np.abs(x)))
-
-    def struck(x, v, u):
-        beyond = np.sign(x) * (abs(x) - gap) if abs(x) > gap else 0.0
-        return free(x, v, u) - 50 * w * w * beyond
-
-    xs, vs = rk4(force, fs, struck)
-    acc = [np.array([a(*s) for s in zip(*xv, force)]) for a, xv in ((free, (x, v)), (struck, (xs, vs)))]
+    struck = _struck(free, 50 * (2 * np.pi * 15.0) ** 2, 0.6 * float(np.max(np.abs(x))))
+    acc = [free(x, v, force), struck(*rk4(force, fs, struck), force)]
     acc = [a + 0.01 * a.std() * rng.standard_normal(n) for a in acc]
     band = modal_band(np.array([15.0]), fs, n)
     assert band == pytest.approx((6.0, 67.5))
@@ -954,19 +961,9 @@ def test_motion_above_the_band_has_the_record_analysed_again_in_a_band_twice_as_
     # stopper is named in one noise realisation of five and nothing in the others, the one-mode baseline held
     # out at 1.00 in either band)
     fs, n = 1000.0, 20000
-    t = np.arange(n) / fs
-    rng = np.random.default_rng(3)
-    force = sum(np.cos(2 * np.pi * fl * t + rng.uniform(0, 2 * np.pi)) for fl in np.arange(5.0, 25.01, 0.5))
-    w, zeta = 2 * np.pi * 15.0, 0.01
-
-    def free(x, v, u):
-        return u - 2 * zeta * w * v - w * w * x
-
-    gap = 0.6 * float(np.max(np.abs(rk4(force, fs, free)[0])))
-
-    def struck(x, v, u):
-        return free(x, v, u) - 50 * w * w * np.sign(x) * np.maximum(np.abs(x) - gap, 0.0)
-
+    force, rng = _multisine(fs, n)
+    free = _mode(15.0, 0.01)
+    struck = _struck(free, 50 * (2 * np.pi * 15.0) ** 2, 0.6 * float(np.max(np.abs(rk4(force, fs, free)[0]))))
     acc = struck(*rk4(force, fs, struck), force)
     acc = acc + 0.01 * acc.std() * rng.standard_normal(n)
     m = Measurement(fs, Channel("force", "force", force), (Channel("struck", "acceleration", acc),))
@@ -989,16 +986,11 @@ def test_a_blow_nobody_measured_rings_above_the_band_and_the_note_reads_the_bloc
     # with nothing hidden, seeds 0-899); read on the blocks discovery keeps once it has left the blow's out,
     # none (``_discover`` passes them)
     fs, n = 1000.0, 20000
-    t = np.arange(n) / fs
-    rng = np.random.default_rng(3)
-    force = sum(np.cos(2 * np.pi * fl * t + rng.uniform(0, 2 * np.pi)) for fl in np.arange(5.0, 25.01, 0.5))
+    force, rng = _multisine(fs, n)
     blow = np.zeros(n)
     blow[10000:10003] = 200 * force.std() * np.sin(np.pi * (np.arange(3) + 0.5) / 3)
     acc = np.zeros(n)
-    for f_hz, zeta in ((15.0, 0.01), (150.0, 0.02)):
-        def mode(x, v, u, w=2 * np.pi * f_hz, zeta=zeta):
-            return u - 2 * zeta * w * v - w * w * x
-
+    for mode in (_mode(15.0, 0.01), _mode(150.0, 0.02)):
         acc += mode(*rk4(force + blow, fs, mode), force + blow)
     acc += 0.01 * acc[:9000].std() * rng.standard_normal(n)
     band = modal_band(np.array([15.0]), fs, n)
