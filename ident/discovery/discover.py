@@ -525,7 +525,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         fit_split, fit_said, _ = _without_dropouts(_split(prep_fit), prep_fit, fit_gaps)
         said += [f"fit data: {line}" for line in fit_said]
         fit_segments = ((slice(prep_fit.edge, prep_fit.n - prep_fit.edge),) if not fit_split.excluded else
-                        tuple(b for k, b in enumerate(fit_split.blocks) if k not in fit_split.excluded))
+                        fit_split.kept)
     for line in said:
         notes.append(line)
         say(line)
@@ -575,8 +575,7 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         else:
             onsets = []
     # either baseline: the data alone say it, on the blocks that stay (a blow nobody measured rings high too)
-    kept = split.train + split.test if split.excluded else None
-    above = above_band(m, prep.band, keep=sorted(kept, key=lambda b: b.start) if kept else None)
+    above = above_band(m, prep.band, keep=split.kept if split.excluded and split.kept else None)
     wide = min(0.45 * m.fs_hz, prep.band[1] * WIDE_HARMONICS / harmonics)  # (``modal_band``'s top)
     if above and rig is None and fit_data is None and harmonics < WIDE_HARMONICS and wide > 1.5 * prep.band[1]:
         # motion the input does not drive above the band: a search in the band misses what makes it

@@ -46,6 +46,11 @@ class Split:
     def test(self) -> tuple[slice, ...]:
         return tuple(b for k, b in enumerate(self.blocks) if k in self.held_out and k not in self.excluded)
 
+    @property
+    def kept(self) -> tuple[slice, ...]:
+        """Every block not excluded, training and held-out, in the record's order."""
+        return tuple(b for k, b in enumerate(self.blocks) if k not in self.excluded)
+
     def rows(self, which: str) -> np.ndarray:
         return rows_of(self.train if which == "train" else self.test)
 
