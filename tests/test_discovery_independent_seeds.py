@@ -114,6 +114,22 @@ def test_a_stopper_struck_throughout_is_found_with_the_beam_mode_its_linearisati
 
 
 @pytest.mark.long
+def test_a_stopper_that_leads_between_the_tips_through_its_linear_part_alone_is_found_at_its_next_place():
+    # independent seed 985 (first run at stop 84): a base-driven rig whose beams' first modes lie at 8.98 and
+    # 9.71 Hz, a stopper on beam 2 (0.44 mm at the tip) that it strikes through the record. The fitted baseline
+    # has one mode, and tip 2 holds out near predicting zero. The contact leads between the tips (gain 0.23 over
+    # the baseline, 0.001 over its own linear part) and nothing was found; refined at its next place, tip 2,
+    # it gains 0.32 over the baseline and 0.16 over its own linear part (``discover._next_place``)
+    _, c, d, v = named_right(985)
+    assert np.count_nonzero(d.baseline.drivable) == 1
+    assert any("beats the baseline only through its own linear part: refined at its next place, tip2" in n
+               for n in d.notes)
+    f = d.findings[0]
+    assert f.own_gain > 0.1  # 0.16 over its own linear part: the stopper's gain, not a mode's
+    assert f.parameters["gap"] == pytest.approx(c.truth["gap"], rel=0.2)  # 0.368 mm against 0.436 mm
+
+
+@pytest.mark.long
 def test_a_cubic_behind_a_baseline_with_a_mode_too_many_is_found_on_the_beams_two():
     # independent seed 697 (first run at stop 77, fresh): a base-driven rig whose beams' first modes lie at
     # 8.28 and 8.54 Hz, a cubic spring at tip 2. The modal fit follows the hardening with a third mode
