@@ -941,12 +941,14 @@ def _next_place(scored: list[Candidate], cands: list[Candidate], baseline: Basel
     moves (refined at the next place on every record, seeds 0-99 measured worse: ``_leaders``). On seeds
     900-999 it ran on five records and moved 985 alone; on none of the 43 with nothing hidden among seeds
     0-299 (stop 88)."""
+    linear_only = [c for c in scored if beats_baseline(c, settings) and not significant(c, settings)]
+    if not linear_only:  # (before ``_leaders``, which simulates every candidate again)
+        return []
     order = _leaders(cands, baseline, by_loc, prep, split, warm, scale, bound, settings, next_place=True)
     if len(order) < 2 or order[1].cause != order[0].cause:
         return []
     first, nxt = order[0], order[1]
-    if not any(c.cause == first.cause and c.location == first.location and beats_baseline(c, settings)
-               and not significant(c, settings) for c in scored):
+    if not any(c.cause == first.cause and c.location == first.location for c in linear_only):
         return []
     notes.append(f"{first.label} beats the baseline only through its own linear part: refined at its next place, "
                  f"{nxt.location}, too")
