@@ -26,8 +26,8 @@ from threadpoolctl import threadpool_limits
 from ..rig import RigParams
 from .backbone import CLEAR, free_decay
 from .baselines import Baseline
-from .baselines.modal import (ModalBaseline, check_errors, decay_rows, drivable, glide_partners, gliding, peak_poles,
-                             structural, vector_fit_poles)
+from .baselines.modal import (ModalBaseline, band_lines, check_errors, decay_rows, drivable, glide_partners, gliding,
+                             peak_poles, structural, vector_fit_poles)
 from .baselines.rig import RigBaseline
 from .catalogue import CAUSES, describing_stiffness
 from .characterise import characterise
@@ -38,7 +38,7 @@ from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline
                      gain_candidates, offset_findings, paired_p, pieces_per_block, predict, refine, regress,
                      regressions, same_sensors, score, significant, simulation_bound, spring_damper_responses, train_error)
 from .signals import (HARMONICS, HIT_RESPONSE, ORDER, UNDRIVEN_SHARE, Channel, Dropout, Measurement, Prepared, above_band,
-                      below_band, convert, dropouts, first_family, frf, impulsive, modal_band, preliminary_band, prepare,
+                      below_band, convert, dropouts, first_family, impulsive, modal_band, preliminary_band, prepare,
                       span_text, undriven, within_budget)
 from .split import Split, blocks_reached, by_energy, given, interleaved, rows_of, transients
 
@@ -960,8 +960,8 @@ def _fewer_modes(baseline: ModalBaseline, prep: Prepared, split: Split) -> Modal
 def _one_more_mode(baseline: ModalBaseline, prep: Prepared, split: Split) -> ModalBaseline | None:
     """The baseline fitted again on the training blocks with one mode a force may drive more, where the fitted
     one has fewer such modes than there are responses (and at least one); else None. Its starting poles are
-    the order search's two starts (vector fitting, the FRF's peaks) on the training blocks' FRF, the one whose
-    fit ends with more drivable modes and the smaller fit error kept.
+    the order search's two starts (vector fitting, the FRF's peaks) on the training blocks' FRF
+    (``modal.band_lines``), the one whose fit ends with more drivable modes and the smaller fit error kept.
 
     The order search chooses on what the input alone makes on held-back blocks, from rest: where a beam
     strikes its stopper through the record, no linear model predicts its response there (independent seed
@@ -981,18 +981,15 @@ def _one_more_mode(baseline: ModalBaseline, prep: Prepared, split: Split) -> Mod
         return None
     rows = split.rows("train")
     try:
-        f, H, puu = frf(prep.u[rows], prep.zva[0][rows], prep.fs_hz)
+        f, H = band_lines(prep, rows)
     except NUMERIC_FAILURES:
         return None
-    lo, hi = prep.band
-    inside = (f >= lo) & (f <= hi)
-    if not inside.any():
+    if f.size < 4 * (have + 1):  # as few lines per mode as the order search allows
         return None
-    keep = inside & (puu > 1e-3 * puu[inside].max())
     best = None
     for start in (vector_fit_poles, peak_poles):
         try:
-            poles = start(f[keep], H[:, keep], have + 1)
+            poles = start(f, H, have + 1)
             if poles is None:
                 continue
             fitted = _without_devices(ModalBaseline.fit(prep, rows, poles0=poles), prep, split)

@@ -488,6 +488,24 @@ def decay_rows(prep: Prepared, rows: np.ndarray) -> np.ndarray | None:
     return rows[rows <= rows[loud][-1]]
 
 
+def band_lines(prep: Prepared, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The FRF (lines, (k, lines)) the starting poles are fitted to: over ``rows``, on the band's lines where
+    the excitation carries at least 1e-3 of its largest power there (none where the band holds no line).
+
+    A hammer record's input is its hit, and this FRF is taken over the whole record, which holds it: a record
+    that starts at the hit has it inside the band-pass's edge, before the first row, and a force channel that
+    reads zero after it left the rows no input at all (independent seeds 176 and 197, clamped-clamped beams
+    hit 3 and 10 ms into 7.5 and 8.5 s records: "power on too few frequency lines", 3 of 474 and 1,842)."""
+    src = np.arange(prep.n) if prep.transient else rows
+    f, H, puu = frf(prep.u[src], prep.zva[0][src], prep.fs_hz)
+    lo, hi = prep.band
+    inside = (f >= lo) & (f <= hi)
+    if not inside.any():
+        return f[:0], H[:, :0]
+    keep = inside & (puu > 1e-3 * puu[inside].max())
+    return f[keep], H[:, keep]
+
+
 def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
               poles0: np.ndarray | None = None, check: np.ndarray | None = None,
               decay: np.ndarray | None = None) -> tuple[LinearModel, float]:
@@ -524,24 +542,16 @@ def fit_model(prep: Prepared, rows: np.ndarray, max_modes: int = MAX_MODES,
         C, fit = fit_residues(poles, prep, rows, at_rest=True)
         m = poles.size
         return LinearModel(poles, np.ones((1, m), complex), C), _nrmse(fit, prep.measured[rows])
-    # a hammer record's input is its hit, and the FRF that gives the starting poles is taken over the whole
-    # record, which holds it: a record that starts at the hit has it inside the band-pass's edge, before the
-    # first row, and a force channel that reads zero after it left the rows no input at all (independent
-    # seeds 176 and 197, clamped-clamped beams hit 3 and 10 ms into 7.5 and 8.5 s records: "power on too
-    # few frequency lines", 3 of 474 and 1,842). The poles are refined and the order chosen on ``rows``.
-    src = np.arange(prep.n) if prep.transient else rows
-    f, H, puu = frf(prep.u[src], prep.zva[0][src], prep.fs_hz)
-    lo, hi = prep.band
-    keep = (f >= lo) & (f <= hi) & (puu > 1e-3 * puu[(f >= lo) & (f <= hi)].max())
-    if keep.sum() < 8:
-        raise ValueError(f"the excitation has power on {int(keep.sum())} frequency line(s) in the band, too few to fit a "
+    # (the starting poles from ``band_lines``; refined and the order chosen on ``rows``)
+    f, H = band_lines(prep, rows)
+    if f.size < 8:
+        raise ValueError(f"the excitation has power on {f.size} frequency line(s) in the band, too few to fit a "
                          "modal model (at least 8): a single sine does not show the structure's modes; give "
                          "--model RIG.yaml for a rig model as the baseline, or --fit-data with a broadband, swept or "
                          "stepped record of the same structure")
-    f, H = f[keep], H[:, keep]
     scored = prep.measured[rows if check is None else check]
     kept, misses = None, 0
-    for m in range(1, min(max_modes, keep.sum() // 4) + 1):
+    for m in range(1, min(max_modes, f.size // 4) + 1):
         # two starts per order, the better refined one kept: vector fitting's poles, and poles at the
         # FRF's peaks. On few lines (a stepped sine) vector fitting can put two modes where one is and
         # miss a mode that one sensor alone sees (independent seed 61: 13.97 and 14.51 Hz where the
