@@ -29,6 +29,7 @@ from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CUBIC, describing_stiffness, force_series, law_parameters
 from ident.discovery.discover import engaged_throughout, findable
 from ident.discovery.model import Element
+from ident.discovery import search
 from ident.discovery.search import Candidate, Scoring, score
 from ident.discovery.signals import modal_band, prepare
 from ident.discovery.split import interleaved
@@ -360,6 +361,24 @@ def test_a_linear_mismatch_is_no_finding_against_a_model_fitted_to_the_same_reco
     cubic = Candidate("cubic_stiffness", "tip1", {}, gain=0.04, p_value=0.01, test_nrmse=0.03)
     assert findable([mismatch, cubic], fitted_here=True) == [cubic]
     assert findable([mismatch, cubic], fitted_here=False) == [mismatch, cubic]
+
+
+def test_a_cause_must_beat_the_best_linear_part_any_candidate_was_refitted_with():
+    """A candidate's own linear part alone holds out at test NRMSE / (1 - own gain). Against a model fitted
+    to the record, a cause that predicts no better than the best such part is the baseline's imperfection,
+    unless it acts in the training blocks as a cause may against its own part (``ACTS_IN_TRAINING``)."""
+    cubic = Candidate("cubic_stiffness", "v1", {}, gain=0.267, p_value=3e-13, test_nrmse=0.454, own_gain=0.067)
+    quad = Candidate("quadratic_stiffness", "v1", {}, gain=0.178, p_value=6e-4, test_nrmse=0.505, own_gain=0.21)
+    trained = replace(quad, cause="contact", own_gain_trained=0.57)
+    plain = Candidate("coulomb_friction", "v1", {}, gain=0.3, p_value=1e-3, test_nrmse=0.44)
+    assert search.own_part_nrmse(cubic) == pytest.approx(0.454 / 0.933)  # 0.4866
+    assert search.own_part_nrmse(quad) == pytest.approx(0.505 / 0.79)  # 0.639: worse than the cubic's
+    assert search.own_part_nrmse(plain) == np.inf  # no own part: nothing to ask
+    assert D.best_linear_part([quad, plain, cubic]) is cubic
+    assert findable([quad, trained, plain, cubic], True) == [trained, plain, cubic]
+    assert findable([quad, cubic], False) == [quad, cubic]  # a rig model or another record's fit: not asked
+    assert findable([quad, plain], True) == [quad, plain]  # the quadratic's own part is the only one: passed
+    assert D.best_linear_part([plain]) is None
 
 
 def test_a_two_sided_stopper_engaged_through_nearly_all_the_motion_is_a_spring_and_no_finding():
