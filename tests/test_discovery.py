@@ -379,6 +379,17 @@ def test_a_cause_must_beat_the_best_linear_part_any_candidate_was_refitted_with(
     assert findable([quad, cubic], False) == [quad, cubic]  # a rig model or another record's fit: not asked
     assert findable([quad, plain], True) == [quad, plain]  # the quadratic's own part is the only one: passed
     assert D.best_linear_part([plain]) is None
+    # said where it would have led; beside a candidate of the same cause and place that stays (their elements'
+    # arrays alike: no == between candidates, independent seed 941 raised on it)
+    law = lambda: (Element(CUBIC, np.array([1.0, 2.0]), np.array([0.5, 0.5]), np.array([1.0, 1.0])),)  # noqa: E731
+    twin = replace(quad, elements=law())
+    stays = replace(quad, elements=law(), test_nrmse=0.40, gain=0.35)  # its own part alone 0.506: the cubic's bar
+    assert D.past_linear_parts([twin, stays, cubic]) == [stays, cubic]
+    note = D._linear_part_aside([twin, stays, cubic], [], Settings(), True)
+    assert note == ["quadratic_stiffness at v1 (held-out gain 0.18, NRMSE 0.505) was set aside: the linear part "
+                    "refitted with cubic_stiffness at v1 predicts the held-out blocks as well alone (NRMSE 0.487), "
+                    "so the fitted baseline was off, not a cause found"]
+    assert D._linear_part_aside([twin, stays, cubic], [], Settings(), False) == []
 
 
 def test_a_two_sided_stopper_engaged_through_nearly_all_the_motion_is_a_spring_and_no_finding():

@@ -1205,8 +1205,8 @@ def _linear_part_aside(scored: list[Candidate], findings: list[Candidate], setti
                        fitted_here: bool) -> list[str]:
     """The significant candidate with the largest held-out gain that ``past_linear_parts`` set aside, when it
     gains more than the first finding (or there is none): said, with the linear part that predicts as well."""
-    kept = past_linear_parts(scored) if fitted_here else scored
-    aside = [c for c in scored if c not in kept and significant(c, settings)]
+    kept = {id(c) for c in (past_linear_parts(scored) if fitted_here else scored)}  # (candidates hold arrays: no ==)
+    aside = [c for c in scored if id(c) not in kept and significant(c, settings)]
     if not aside:
         return []
     c = max(aside, key=lambda c: c.gain)
