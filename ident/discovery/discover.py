@@ -33,10 +33,11 @@ from .catalogue import CAUSES, describing_stiffness
 from .characterise import characterise
 from .model import NUMERIC_FAILURES
 from .result import Discovery, options, softens
-from .search import (ACTS_IN_TRAINING, Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, beats_baseline,
-                     block_errors, busiest, choose, clipped_ranges, clipping_candidates, clustered_p, compensation,
-                     gain_candidates, offset_findings, own_part_nrmse, paired_p, pieces_per_block, predict, refine,
-                     regress, regressions, same_sensors, score, significant, simulation_bound, spring_damper_responses, train_error)
+from .search import (ACTS_IN_TRAINING, Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual,
+                     beats_baseline, block_errors, busiest, choose, clipped_ranges, clipping_candidates, clustered_p,
+                     compensation, gain_candidates, offset_findings, own_part_nrmse, paired_p, pieces_per_block,
+                     predict, refine, regress, regressions, same_sensors, score, significant, simulation_bound,
+                     spring_damper_responses, train_error)
 from .signals import (HARMONICS, HIT_RESPONSE, ORDER, UNDRIVEN_SHARE, Channel, Dropout, Measurement, Prepared, above_band,
                       below_band, convert, dropouts, first_family, impulsive, modal_band, preliminary_band, prepare,
                       span_text, undriven, within_budget)
