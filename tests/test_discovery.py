@@ -24,12 +24,11 @@ from oscillator import linear_under_random_force
 from ident.cli.bench_discovery import Case, Verdict, by_floor, by_strength, judge, report, twin_report
 from ident.cli.discover import stage_printer
 from ident.cli.main import main as ident_main
-from ident.discovery import Channel, Measurement, Settings, discover
+from ident.discovery import Channel, Measurement, Settings, discover, search
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CUBIC, describing_stiffness, force_series, law_parameters
 from ident.discovery.discover import engaged_throughout, findable
 from ident.discovery.model import Element
-from ident.discovery import search
 from ident.discovery.search import Candidate, Scoring, score
 from ident.discovery.signals import modal_band, prepare
 from ident.discovery.split import interleaved
