@@ -24,7 +24,7 @@ from oscillator import linear_under_random_force
 from ident.cli.bench_discovery import Case, Verdict, by_floor, by_strength, judge, report, twin_report
 from ident.cli.discover import stage_printer
 from ident.cli.main import main as ident_main
-from ident.discovery import Channel, Measurement, Settings, discover, search
+from ident.discovery import Channel, Measurement, Settings, discover
 from ident.discovery.baselines.rig import RigBaseline
 from ident.discovery.catalogue import CAUSES, CUBIC, describing_stiffness, force_series, law_parameters
 from ident.discovery.discover import engaged_throughout, findable
@@ -360,35 +360,6 @@ def test_a_linear_mismatch_is_no_finding_against_a_model_fitted_to_the_same_reco
     cubic = Candidate("cubic_stiffness", "tip1", {}, gain=0.04, p_value=0.01, test_nrmse=0.03)
     assert findable([mismatch, cubic], fitted_here=True) == [cubic]
     assert findable([mismatch, cubic], fitted_here=False) == [mismatch, cubic]
-
-
-def test_a_cause_must_beat_the_best_linear_part_any_candidate_was_refitted_with():
-    """A candidate's own linear part alone holds out at test NRMSE / (1 - own gain). Against a model fitted
-    to the record, a cause that predicts no better than the best such part is the baseline's imperfection,
-    unless it acts in the training blocks as a cause may against its own part (``ACTS_IN_TRAINING``)."""
-    cubic = Candidate("cubic_stiffness", "v1", {}, gain=0.267, p_value=3e-13, test_nrmse=0.454, own_gain=0.067)
-    quad = Candidate("quadratic_stiffness", "v1", {}, gain=0.178, p_value=6e-4, test_nrmse=0.505, own_gain=0.21)
-    trained = replace(quad, cause="contact", own_gain_trained=0.57)
-    plain = Candidate("coulomb_friction", "v1", {}, gain=0.3, p_value=1e-3, test_nrmse=0.44)
-    assert search.own_part_nrmse(cubic) == pytest.approx(0.454 / 0.933)  # 0.4866
-    assert search.own_part_nrmse(quad) == pytest.approx(0.505 / 0.79)  # 0.639: worse than the cubic's
-    assert search.own_part_nrmse(plain) == np.inf  # no own part: nothing to ask
-    assert D.best_linear_part([quad, plain, cubic]) is cubic
-    assert findable([quad, trained, plain, cubic], True) == [trained, plain, cubic]
-    assert findable([quad, cubic], False) == [quad, cubic]  # a rig model or another record's fit: not asked
-    assert findable([quad, plain], True) == [quad, plain]  # the quadratic's own part is the only one: passed
-    assert D.best_linear_part([plain]) is None
-    # said where it would have led; beside a candidate of the same cause and place that stays (their elements'
-    # arrays alike: no == between candidates, independent seed 941 raised on it)
-    law = lambda: (Element(CUBIC, np.array([1.0, 2.0]), np.array([0.5, 0.5]), np.array([1.0, 1.0])),)  # noqa: E731
-    twin = replace(quad, elements=law())
-    stays = replace(quad, elements=law(), test_nrmse=0.40, gain=0.35)  # its own part alone 0.506: the cubic's bar
-    assert D.past_linear_parts([twin, stays, cubic]) == [stays, cubic]
-    note = D._linear_part_aside([twin, stays, cubic], [], Settings(), True)
-    assert note == ["quadratic_stiffness at v1 (held-out gain 0.18, NRMSE 0.505) was set aside: the linear part "
-                    "refitted with cubic_stiffness at v1 predicts the held-out blocks as well alone (NRMSE 0.487), "
-                    "so the fitted baseline was off, not a cause found"]
-    assert D._linear_part_aside([twin, stays, cubic], [], Settings(), False) == []
 
 
 def test_a_two_sided_stopper_engaged_through_nearly_all_the_motion_is_a_spring_and_no_finding():

@@ -33,11 +33,10 @@ from .catalogue import CAUSES, describing_stiffness
 from .characterise import characterise
 from .model import NUMERIC_FAILURES
 from .result import Discovery, options, softens
-from .search import (ACTS_IN_TRAINING, Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual,
-                     beats_baseline, block_errors, busiest, choose, clipped_ranges, clipping_candidates, clustered_p,
-                     compensation, gain_candidates, offset_findings, own_part_nrmse, paired_p, pieces_per_block,
-                     predict, refine, regress, regressions, same_sensors, score, significant, simulation_bound,
-                     spring_damper_responses, train_error)
+from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, beats_baseline,
+                     block_errors, busiest, choose, clipped_ranges, clipping_candidates, clustered_p, compensation,
+                     gain_candidates, offset_findings, paired_p, pieces_per_block, predict, refine, regress,
+                     regressions, same_sensors, score, significant, simulation_bound, spring_damper_responses, train_error)
 from .signals import (HARMONICS, HIT_RESPONSE, ORDER, UNDRIVEN_SHARE, Channel, Dropout, Measurement, Prepared, above_band,
                       below_band, convert, dropouts, first_family, impulsive, modal_band, preliminary_band, prepare,
                       span_text, undriven, within_budget)
@@ -701,13 +700,6 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
         if not second.findings:
             notes += _linear_corrections(comp_scored, settings)
     notes += _set_aside(scored, sel.findings) + _engaged_aside(scored, sel.findings, char, settings)
-    # a cause that beat the baseline but not a linear part found: that, not "no cause beats the baseline", is
-    # why nothing was found
-    aside = _linear_part_aside(scored, sel.findings, settings, fitted_here)
-    if aside and not sel.findings:
-        sel = Selection([], [], aside)
-    else:
-        notes += aside
     ext_model, ext_out, ext_err, ext_blocks = baseline.model, (), n0, e0
     if sel.findings:
         own = sel.findings[0].baseline or baseline
@@ -862,38 +854,12 @@ def findable(scored: list[Candidate], fitted_here: bool, char: dict | None = Non
     not a cause (independent seed 32's twin, a linear record: a linear mismatch at tip 2, gain 0.05). The
     mismatch is still scored (as regressed, not refined) and listed; against a rig model from a config, or
     a baseline fitted on another record (``--fit-data``), the linear part can be wrong, and it can be a
-    finding.
-
-    For the same reason a cause is no finding against such a model when it predicts the held-out blocks no
-    better than a linear part the search found alone (``past_linear_parts``)."""
+    finding."""
     if char:
         scored = [c for c in scored if not engaged_throughout(c, char)]
     if not fitted_here:
         return scored
-    return [c for c in past_linear_parts(scored) if c.cause != "linear_mismatch"]
-
-
-def best_linear_part(scored: list[Candidate]) -> Candidate | None:
-    """The candidate whose own linear part alone (``own_part_nrmse``) predicts the held-out blocks best."""
-    best = min(scored, key=own_part_nrmse, default=None)
-    return best if best is not None and np.isfinite(own_part_nrmse(best)) else None
-
-
-def past_linear_parts(scored: list[Candidate]) -> list[Candidate]:
-    """The candidates that predict the held-out blocks better than the best linear part any of them was
-    refitted with predicts alone (``best_linear_part``), or, as a cause may against its own part
-    (``significant``), that act in the training blocks. Each cause is asked to beat its own linear part;
-    another cause's can be better still, and then the baseline was merely off. Independent seed 970, a
-    clamped-clamped beam with a weak cubic: the cubic's joint refit alone holds out at 0.487 (the
-    baseline 0.619), the cubic on it barely better and in a few pieces only; a quadratic stiffness, 0.509,
-    gained 0.18 over the baseline and was named. On two records with nothing hidden (stop 88's seeds 116
-    and 251) a quadratic stiffness at 0.039 and a quadratic damping at 0.32 were named where a cubic's
-    linear part alone held out at 0.036 and 0.040."""
-    best = best_linear_part(scored)
-    if best is None:
-        return scored
-    bar = own_part_nrmse(best)
-    return [c for c in scored if c.test_nrmse < bar or c.own_gain_trained >= ACTS_IN_TRAINING]
+    return [c for c in scored if c.cause != "linear_mismatch"]
 
 
 def _regressed(baseline: Baseline, prep: Prepared, rows: np.ndarray, residual: np.ndarray, ranked: list,
@@ -1200,23 +1166,6 @@ def _engaged_aside(scored: list[Candidate], findings: list[Candidate], char: dic
     return [f"{best.label} (held-out gain {best.gain:.2f}) was set aside: its gap is {share:.0%} of the largest "
             "displacement there, so it is engaged through nearly all of the motion, a linear spring more than a "
             "stopper"]
-
-
-def _linear_part_aside(scored: list[Candidate], findings: list[Candidate], settings: Settings,
-                       fitted_here: bool) -> list[str]:
-    """The significant candidate with the largest held-out gain that ``past_linear_parts`` set aside, when it
-    gains more than the first finding (or there is none): said, with the linear part that predicts as well."""
-    kept = {id(c) for c in (past_linear_parts(scored) if fitted_here else scored)}  # (candidates hold arrays: no ==)
-    aside = [c for c in scored if id(c) not in kept and significant(c, settings)]
-    if not aside:
-        return []
-    c = max(aside, key=lambda c: c.gain)
-    if findings and c.gain <= findings[0].gain:
-        return []
-    best = best_linear_part(scored)
-    return [f"{c.label} (held-out gain {c.gain:.2f}, NRMSE {c.test_nrmse:.3g}) was set aside: the linear part "
-            f"refitted with {best.label} predicts the held-out blocks as well alone (NRMSE "
-            f"{own_part_nrmse(best):.3g}), so the fitted baseline was off, not a cause found"]
 
 
 def _set_aside(scored: list[Candidate], findings: list[Candidate]) -> list[str]:

@@ -883,14 +883,6 @@ def over_own_part(c: Candidate, floor: float, alpha: float) -> bool:
     return CAUSES[c.cause].intermittent or not c.own_p >= alpha
 
 
-def own_part_nrmse(c: Candidate) -> float:
-    """The held-out NRMSE of a candidate's own linear part alone (its joint refit, or the baseline with its
-    spring and damper), as ``score`` simulated it; infinite where it did not (no own part, no gain)."""
-    if not (np.isfinite(c.own_gain) and np.isfinite(c.test_nrmse) and c.own_gain < 1.0):
-        return np.inf
-    return c.test_nrmse / (1.0 - c.own_gain)
-
-
 def significant(c: Candidate, settings: Settings) -> bool:
     """Does a scored candidate beat the baseline: below predicting zero, by more than the gain floor, by
     the paired test, and over its own linear part alone (``over_own_part``: by the gain floor, in the
