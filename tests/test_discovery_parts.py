@@ -34,7 +34,7 @@ from ident.discovery.search import (Candidate, Settings, choose, clustered_p, on
 from ident.discovery.signals import (ABOVE_SHARE, HARMONICS, HIT_RESPONSE, Dropout, _first_motion, above_band, bridged,
                                     coherent_share, convert, dropouts, first_family, force_window, frf, hit_response,
                                     miso_frf, modal_band, preliminary_band, prepare, undriven, within_budget)
-from ident.discovery.split import by_energy, given, interleaved, transients
+from ident.discovery.split import by_energy, given, interleaved, resonant_block, transients
 from ident.rig import RigParams, simulate_measured_base
 
 discover_module = importlib.import_module("ident.discovery.discover")  # the module: the package exports its function
@@ -785,6 +785,42 @@ def test_splits_hold_out_two_blocks_in_five_and_refuse_overlap():
     assert not set(s.rows("train")) & set(s.rows("test"))
     with pytest.raises(ValueError, match="overlap"):
         given(10000, 100, slice(0, 6000), slice(5000, 10000))
+
+
+def test_a_sweeps_resonance_rung_in_one_block_is_trained_on_beside_a_held_out_neighbour():
+    # two base-shaken modes (12 and 12.5 Hz, 1.5 % damping; absolute accelerations out) under a linear sweep
+    # 60 -> 5 Hz in 20 s: they ring where the sweep crosses them, 0.5 + 20 x 48 / 55 = 17.95 s into the
+    # record for 12 Hz, and for about 1 / (zeta omega) = 0.9 s after. The default pattern holds that block
+    # out; the split trains on it, with a held-out block beside it
+    fs, fn, zeta = 1000.0, 12.0, 0.015
+    t = np.arange(int(21 * fs)) / fs
+    f_inst = np.clip(60.0 - 55.0 * (t - 0.5) / 20.0, 5.0, 60.0)
+    base = np.sin(2 * np.pi * np.cumsum(f_inst) / fs) * ((t > 0.5) & (t < 20.5))
+    rng = np.random.default_rng(0)
+    tips = []
+    for f in (fn, 12.5):
+        w = 2 * np.pi * f
+        _, tip, _ = lsim(([2 * zeta * w, w * w], [1.0, 2 * zeta * w, w * w]), base, t)
+        noisy = tip + 0.01 * tip.std() * rng.standard_normal(t.size)
+        tips.append(Channel(f"tip{len(tips) + 1}", "acceleration", noisy))
+    m = Measurement(fs, Channel("base", "base_acceleration", base), tuple(tips))
+    prep = prepare(m, (4.8, 54.0))
+    default = interleaved(prep.n, prep.edge, 16)
+    crossing = 0.5 + 20.0 * (60.0 - fn) / 55.0
+    first = next(k for k, b in enumerate(default.blocks) if b.stop / fs > crossing)
+    loud = resonant_block(prep.measured, default)
+    assert loud in (first, first + 1) and loud in default.held_out  # rings from the crossing on
+    split = discover_module._split(prep)
+    assert split.blocks == default.blocks and loud not in split.held_out
+    assert loud - 1 in split.held_out or loud + 1 in split.held_out
+    assert len(split.held_out) == len(default.held_out)
+    # one response: the pattern as it was (``discover._split``: on the Duffing oscillator's sweeps it cost)
+    one = prepare(Measurement(fs, m.excitation, tuple(tips[:1])), (4.8, 54.0))
+    assert resonant_block(one.measured, default) == loud and discover_module._split(one) == default
+    # a stationary input rings every block alike: no such block, the pattern as it was
+    noise = Measurement(fs, m.excitation,
+                        tuple(Channel(c.name, "acceleration", rng.standard_normal(t.size)) for c in tips))
+    assert resonant_block(prepare(noise, (4.8, 54.0)).measured, default) is None
 
 
 def test_a_decays_blocks_hold_equal_shares_of_its_energy():
