@@ -83,9 +83,9 @@ def resonant_block(measured: np.ndarray, split: Split, ratio: float = RESONANT_B
     else. Held out, that block leaves the training blocks without the modes' excitation, and the linear
     fit cannot learn what it is then asked to predict (independent seed 935: a linear sweep 274 -> 5.5 Hz
     in 30 s through the beams' modes at 12.9 and 14.7 Hz in the last block, held out; one mode at 13.4 Hz
-    fitted, held out at 0.94). On the independent generator's seeds 900-999 (in the preliminary band)
-    every swept record has such a block (13-283 times the median), two of 32 random or multisine records
-    (16 and 24 times), no stepped sine (at most 6.6 times); of the eleven sweeps whose block was held
+    fitted, held out at 0.94). On the independent generator's seeds 900-999 (20 blocks in the preliminary
+    band) every swept record has such a block (13-283 times the median), two of 37 random or multisine
+    records (16 and 24 times), no stepped sine (at most 6.6 times); of the eleven sweeps whose block was held
     out, 4 were named right, of the eight whose block was trained on, 7 (``discover._split`` asks it only
     of records with several responses)."""
     rms = np.array([np.sqrt(np.nanmean(measured[b] ** 2, axis=0)) for b in split.blocks])
