@@ -17,7 +17,7 @@ from daq.sim.independent import discovery_case
 from daq.sim.independent.draws import equivalents
 from oscillator import linear_under_random_force, rk4, two_masses_pushed
 from ident.cli.bench_discovery import independent_case, judge
-from ident.discovery.backbone import CLEAR, free_decay
+from ident.discovery.backbone import ALPHA, Backbone, free_decay
 from ident.discovery.discover import (_fit_modal, _input_clipped, _split, _said, _settle_by_backbone, _softening_look_alike,
                                      _undriven_left_out, _warm, noise_floor, sum_notes)
 from ident.discovery.baselines.modal import (Columns, ModalBaseline, _design, drivable, fit_model, peak_poles,
@@ -1327,7 +1327,7 @@ def test_a_free_decays_backbone_has_the_first_order_shape_and_shift_of_its_law(p
     y, u, fs = _free_decay(law)
     bb = free_decay("x", y, u, fs, 50.0)
     errs = {p: bb.line(p)[2] for p in (1.0, 2.0)}
-    assert errs[3.0 - power] >= CLEAR * errs[power]  # the other power's line is CLEAR times further off
+    assert bb.set_aside(errs) == {3.0 - power}  # the other power's line is significantly further off
     f0, df, _ = bb.line(power)
     assert f0 == pytest.approx(50.0, abs=0.05)
     assert df == pytest.approx(50.0 * shift(bb.amplitude.max()), rel=0.05)
@@ -1337,8 +1337,8 @@ def test_a_linear_decays_backbone_separates_nothing():
     # no shift beyond 0.1 % of the frequency (the laws above shift it by 6 %)
     y, u, fs = _free_decay(lambda z: 0.0)
     bb = free_decay("x", y, u, fs, 50.0)
-    errs = sorted(bb.line(p)[2] for p in (1.0, 2.0))
-    assert errs[1] < CLEAR * errs[0] and abs(bb.line(2.0)[1]) < 0.05  # neither power separates
+    assert bb.set_aside({p: bb.line(p)[2] for p in (1.0, 2.0)}) == set()  # neither power separates
+    assert abs(bb.line(2.0)[1]) < 0.05
 
 
 @pytest.mark.parametrize("cause, parameters", [
@@ -1361,6 +1361,36 @@ def test_a_laws_describing_stiffness_is_its_force_on_a_cosine_projected_on_the_c
     assert describing_stiffness("coulomb_friction", {"force_per_mass": 1.0}, np.ones(3)) is None
 
 
+def _gliding(n: int) -> Backbone:
+    """n backbone points gliding from 103 Hz down to 100 Hz."""
+    a = np.geomspace(1.0, 0.1, n)
+    return Backbone("x", 100.0, a, 100.0 + 3.0 * a**2)
+
+
+@pytest.mark.parametrize("n, ratio", [(5, 3.046), (14, 1.640)])
+def test_the_backbones_laws_are_set_apart_at_the_tabulated_f_quantile(n, ratio):
+    # F(n - 2, n - 2) at 95 % from the printed tables (Fisher and Yates; NIST/SEMATECH e-Handbook 1.3.6.7.3):
+    # F(3, 3) = 9.277, F(12, 12) = 2.687; two laws' RMS errors must differ by their square roots
+    assert ALPHA == 0.05
+    bb = _gliding(n)
+    assert bb.set_aside({"a": 0.01, "b": 0.01 * ratio * 1.002}) == {"b"}
+    assert bb.set_aside({"a": 0.01, "b": 0.01 * ratio * 0.998}) == set()
+
+
+def test_a_backbone_without_a_significant_glide_sets_nothing_aside():
+    # frequencies that only scatter (0.05 Hz) about 100 Hz: the best line's glide passes the nested F-test
+    # (F(1, 12)) in about ALPHA of the draws, and nothing else is ever set aside
+    rng = np.random.default_rng(92)
+    a = np.geomspace(1.0, 0.1, 14)
+    x = np.column_stack([np.ones(14), a**2])
+    passed = 0
+    for _ in range(4000):
+        f = 100.0 + 0.05 * rng.standard_normal(14)
+        best = float(np.sqrt(np.mean((f - x @ np.linalg.lstsq(x, f, rcond=None)[0]) ** 2)))
+        passed += bool(Backbone("x", 100.0, a, f).set_aside({"law": best, "other": 1e3 * best}))
+    assert passed / 4000 == pytest.approx(ALPHA, abs=0.012)  # 3.4 binomial deviations
+
+
 def test_a_stoppers_decay_is_told_from_a_cubics_by_its_backbones_shape():
     # a two-sided stopper at 0.25 mm, 2 x the mode's stiffness beyond it, rings down from 0.95 mm: its
     # decay glides until the amplitude falls to the gap, then not at all; a cubic's glides on as A^2
@@ -1373,7 +1403,8 @@ def test_a_stoppers_decay_is_told_from_a_cubics_by_its_backbones_shape():
                                                               "side": "both"}, a))
     cubic = bb.shape_error(describing_stiffness("cubic_stiffness", {"coefficient_per_mass": 1.0}, a))
     quadratic = bb.shape_error(describing_stiffness("quadratic_stiffness", {"coefficient_per_mass": 1.0}, a))
-    assert contact * CLEAR < min(cubic, quadratic)
+    assert bb.set_aside({"contact": contact, "cubic_stiffness": cubic, "quadratic_stiffness": quadratic}) == {
+        "cubic_stiffness", "quadratic_stiffness"}
     # a softening law's shape cannot follow a hardening glide: no better than no glide at all
     softening = bb.shape_error(describing_stiffness("cubic_stiffness", {"coefficient_per_mass": -1.0}, a))
     assert softening == pytest.approx(float(np.std(bb.frequency_hz)))

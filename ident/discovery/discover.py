@@ -24,7 +24,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ..rig import RigParams
-from .backbone import CLEAR, free_decay
+from .backbone import free_decay
 from .baselines import Baseline
 from .baselines.modal import (ModalBaseline, band_lines, check_errors, decay_rows, drivable, glide_partners, gliding,
                              peak_poles, structural, vector_fit_poles)
@@ -748,8 +748,9 @@ def _settle_by_backbone(first: Candidate, alike: list[Candidate], scored: list[C
     the baseline, p = 0.16 over its own part, where a quadratic stiffness was named at 0.049), include
     stiffness laws of two causes or more, each candidate's shape (its describing
     stiffness at the backbone's amplitudes, ``catalogue.describing_stiffness``, its scale free) is fitted
-    to the measured backbone; a cause whose shape fits ``backbone.CLEAR`` times worse than the best is set
-    aside, the first finding too (then the best-gaining candidate of a cause that fits takes its place).
+    to the measured backbone; a cause whose shape fits significantly worse than the best
+    (``Backbone.set_aside``) is set aside, the first finding too (then the best-gaining candidate of a
+    cause that fits takes its place).
     The held-out error over a hammer record's few blocks weighs the linear part's and the damping's errors
     with the law's; the backbone weighs the law alone (a stopper's decay glides down to its gap and no
     further, a cubic's on as amplitude^2: ``test_discovery_parts``). Returns the first finding, its
@@ -781,8 +782,7 @@ def _settle_by_backbone(first: Candidate, alike: list[Candidate], scored: list[C
     for c in here:
         e = bb.shape_error(describing_stiffness(c.cause, c.parameters, displacement))
         errs[c.cause] = min(errs.get(c.cause, np.inf), e)
-    best = min(errs.values())
-    out = {cause for cause, e in errs.items() if e >= CLEAR * max(best, 1e-12)}
+    out = bb.set_aside(errs)
     if not out:
         return first, alike, ""
     # a look-alike at another response was not judged by this backbone: it stays
