@@ -45,6 +45,7 @@ from .signals import MAX_SAMPLES, ORDER, Prepared, convert
 from .split import Split, rows_of
 
 
+ROUND_OFF = 1e-9  # pieces whose errors differ by less than this share are a tie (``signed_rank_p``)
 MIN_RANK_PIECES = 5  # fewer pieces than this: the signed-rank test's p hangs on the count alone, the t-test decides
 PENALTY = 1e9  # the refinement's objective where a simulation diverges or a parameter leaves its range
 # a candidate that gains nothing over its own linear part on held-out blocks still may be a finding if over the
@@ -235,9 +236,15 @@ def signed_rank_p(a: np.ndarray, b: np.ndarray) -> float:
     ``MIN_RANK_PIECES`` pieces the t-test decides: the rank test's smallest p there, 2^-n, is at least
     1/16 and says only how many pieces improved (a 3 s rig record, 4 pieces all better by a sensor gain:
     p = 0.0625 whatever the gain, the t-test 0.026)."""
-    d = np.asarray(a, float) - np.asarray(b, float)
-    if not np.all(np.isfinite(d)) or np.count_nonzero(d) < MIN_RANK_PIECES:
-        return paired_p(a, b)  # also a diverged side, and no difference at all (p = 1)
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    d = a - b
+    if not np.all(np.isfinite(d)):
+        return paired_p(a, b)  # a diverged side
+    # a piece both predict alike, exactly or to round-off, says nothing either way: dropped (Wilcoxon's own
+    # rule for zero differences), and the test runs on the pieces that differ
+    d = d[np.abs(d) > ROUND_OFF * np.maximum(np.abs(a), np.abs(b))]
+    if d.size < MIN_RANK_PIECES:
+        return paired_p(a, b)  # also no difference at all (p = 1)
     return float(wilcoxon(d, alternative="greater").pvalue)
 
 
