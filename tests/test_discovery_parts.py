@@ -29,8 +29,8 @@ from ident.discovery.baselines import Location
 from ident.discovery.result import Discovery
 from ident.discovery.model import (Element, LinearModel, mode_states, nudging_gain, simulate, substeps_for,
                                   without_feedthrough)
-from ident.discovery.search import (Candidate, Settings, choose, clustered_p, one_sign, paired_p, pieces_per_block,
-                                    predict, signed_rank_p, significant)
+from ident.discovery.search import (Candidate, Scoring, Settings, choose, clustered_p, moving_pieces, one_sign, paired_p,
+                                    pieces_per_block, predict, signed_rank_p, significant)
 from ident.discovery.signals import (ABOVE_SHARE, HARMONICS, HIT_RESPONSE, Dropout, _first_motion, above_band, bridged,
                                     coherent_share, convert, dropouts, first_family, force_window, frf, hit_response,
                                     miso_frf, modal_band, preliminary_band, prepare, undriven, within_budget)
@@ -781,6 +781,50 @@ def test_the_test_against_the_baseline_is_the_exact_signed_rank_test_and_holds_a
     # four pieces, all better: the rank test's p could not go below 1/16, so the t-test decides
     four = np.array([0.0266, 0.04, 0.0106, 0.0109])
     assert signed_rank_p(a[:4], a[:4] - four) == paired_p(a[:4], a[:4] - four) < 0.05
+
+
+def test_a_hammer_records_pieces_of_noise_alone_test_no_model():
+    # one mode at 50 Hz and 1 % damping hit at the start of a 10-s record at 1 kHz, the response's noise
+    # 0.1 % of its peak. A held-out piece tests a model only where its motion is ``NOISE_MARGIN`` = 2 times
+    # the quietest piece's RMS m: for a decay a e^(-zeta w t) over noise of RMS s, where
+    # a^2 e^(-2 zeta w t) / 2 + s^2 >= 4 m^2, up to t* = ln(a / (2 (4 m^2 - s^2))^0.5) / (zeta w), with a, s
+    # and m read off the prepared record (its first piece, its last second, its pieces)
+    fs, f0, zeta, n = 1000.0, 50.0, 0.01, 10000
+    w = 2 * np.pi * f0
+    model = LinearModel(np.array([complex(-zeta * w, w * np.sqrt(1 - zeta**2))]), np.array([[1.0 + 0j]]),
+                        np.array([[1.0 + 0j]]))
+    F = np.zeros(n)
+    F[3:6] = np.sin(np.pi * (np.arange(3) + 0.5) / 3)
+    x = simulate(model, F, fs, [(0, 2)])[:, 0]
+    x = x + 1e-3 * np.abs(x).max() * np.random.default_rng(93).standard_normal(n)
+    prep = prepare(Measurement(fs, Channel("F", "force", F), (Channel("a", "acceleration", x),)), (20.0, 150.0))
+    assert prep.transient
+    piece = int(5 * fs / f0)
+    segs = [slice(prep.edge, n - prep.edge)]
+    scale = np.ones(1)
+    tested = moving_pieces(prep, segs, scale, piece)
+    y = prep.measured[:, 0]
+    rms = np.array([np.sqrt(np.mean(p**2)) for p in np.array_split(y[segs[0]], tested.size)])
+    t = (prep.edge + piece * (np.arange(tested.size) + 0.5)) / fs  # each piece's middle
+    s = float(np.sqrt(np.mean(y[-int(fs):] ** 2)))  # the last second: noise alone (e^-31 of the peak)
+    a = np.sqrt(2) * rms[0] * np.exp(zeta * w * t[0])
+    t_star = np.log(a / np.sqrt(2 * (4 * rms.min() ** 2 - s**2))) / (zeta * w)
+    assert 2.0 < t_star < 2.6  # the band-pass keeps a quarter of the noise's power
+    assert np.all(tested[t < t_star - 0.1]) and not np.any(tested[t > t_star + 0.1])  # to a piece
+    # the rank tests count those pieces alone: a candidate better in each of the k that move (by distinct
+    # amounts) and worse in every piece of noise has the exact one-sided p of k pieces all better, 2^-k
+    k = int(np.count_nonzero(tested))
+    base = np.where(tested, 1.0, 0.5)
+    better = np.where(tested, 0.9 - 0.01 * np.cumsum(tested), 0.6)
+    sc = Scoring(scale, base, 1.0, 0, np.inf, piece, tested=tested)
+    assert k >= 8 and sc.rank_p(base, better) == pytest.approx(2.0**-k, rel=1e-9)
+    assert signed_rank_p(base, better) > 0.5  # over every piece the noise's pieces outvote them
+    # a record driven throughout has no such pieces: every piece tests
+    drive = np.random.default_rng(94).standard_normal(n)
+    forced = simulate(model, drive, fs, [(0, 2)])[:, 0]
+    steady = prepare(Measurement(fs, Channel("F", "force", drive), (Channel("a", "acceleration", forced),)),
+                     (20.0, 150.0))
+    assert not steady.transient and moving_pieces(steady, segs, scale, piece) is None
 
 
 def test_splits_hold_out_two_blocks_in_five_and_refuse_overlap():

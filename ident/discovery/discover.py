@@ -35,8 +35,9 @@ from .model import NUMERIC_FAILURES
 from .result import Discovery, options, softens
 from .search import (Candidate, FitLevel, Scoring, Selection, Settings, baseline_residual, beats_baseline,
                      block_errors, busiest, choose, clipped_ranges, clipping_candidates, clustered_p, compensation,
-                     gain_candidates, offset_findings, paired_p, pieces_per_block, predict, refine, regress,
-                     regressions, same_sensors, score, significant, simulation_bound, spring_damper_responses, train_error)
+                     gain_candidates, moving_pieces, offset_findings, paired_p, pieces_per_block, predict, refine,
+                     regress, regressions, same_sensors, score, significant, simulation_bound, spring_damper_responses,
+                     train_error)
 from .signals import (HARMONICS, HIT_RESPONSE, ORDER, UNDRIVEN_SHARE, Channel, Dropout, Measurement, Prepared, above_band,
                       below_band, convert, dropouts, first_family, impulsive, modal_band, preliminary_band, prepare,
                       span_text, undriven, within_budget)
@@ -600,7 +601,8 @@ def _discover(m: Measurement, rig: RigParams | None, fit_data: Measurement | Non
     scale = np.maximum(prep.measured[test_rows].std(axis=0), 1e-300)
     piece = max(16, int(PIECE_PERIODS * prep.fs_hz / f_min))
     e0, n0 = block_errors(baseline, baseline.model, prep, split.test, warm, scale, (), bound, piece)
-    sc = Scoring(scale, e0, n0, warm, bound, piece, settings.gain_floor, settings.alpha)
+    sc = Scoring(scale, e0, n0, warm, bound, piece, settings.gain_floor, settings.alpha,
+                 moving_pieces(prep, split.test, scale, piece))
     kind = "rig model" if rig is not None else "modal model"
     k = len(baseline.model.frequencies_hz)
     say(f"baseline: {kind} with {k} mode{'' if k == 1 else 's'}, band {prep.band[0]:.3g}-"
