@@ -45,7 +45,7 @@ from .signals import MAX_SAMPLES, ORDER, Prepared, convert
 from .split import Split, rows_of
 
 
-ROUND_OFF = 1e-9  # pieces whose errors differ by less than this share are a tie (``signed_rank_p``)
+ROUND_OFF = 1e-9  # pieces whose errors differ by at most this share of the larger are a tie (``signed_rank_p``)
 NOISE_MARGIN = 2.0  # on a hammer record, a piece tests a model only where its motion is this many times the quietest's
 MIN_RANK_PIECES = 5  # fewer pieces than this: the signed-rank test's p hangs on the count alone, the t-test decides
 PENALTY = 1e9  # the refinement's objective where a simulation diverges or a parameter leaves its range
@@ -189,11 +189,8 @@ def moving_pieces(prep: Prepared, segs, scale: np.ndarray, piece: int) -> np.nda
     last, quietest pieces of motion from the test: power, not a bias."""
     if not prep.transient:
         return None
-    rms = []
-    for seg, k in zip(segs, pieces_per_block(segs, piece)):
-        for part in np.array_split(prep.measured[seg], k):
-            rms.append(float(np.mean(np.sqrt(np.mean(part**2, axis=0)) / scale)))
-    rms = np.asarray(rms)
+    rms = np.array([r for seg, k in zip(segs, pieces_per_block(segs, piece))
+                    for r in piece_rms(prep.measured[seg], k, scale)])
     keep = rms >= NOISE_MARGIN * rms.min()
     return keep if np.count_nonzero(keep) >= MIN_RANK_PIECES else None
 
@@ -216,11 +213,17 @@ def block_errors(baseline: Baseline, model: LinearModel, prep: Prepared, segs, w
         if not np.all(np.isfinite(y)):
             return np.full(int(counts.sum()), np.inf), np.inf
         d = y - prep.measured[seg]
-        for part in np.array_split(d, k):
-            errs.append(float(np.mean(np.sqrt(np.mean(part**2, axis=0)) / scale)))
+        errs += piece_rms(d, k, scale)
         sq += np.sum(d**2, axis=0)
         count += d.shape[0]
     return np.array(errs), float(np.mean(np.sqrt(sq / max(count, 1)) / scale))
+
+
+def piece_rms(x: np.ndarray, k: int, scale: np.ndarray) -> list[float]:
+    """The RMS of each of ``k`` pieces of ``x`` (samples, responses; split as ``np.array_split`` does), per
+    response over ``scale``, mean over responses: ``block_errors``' NRMSE of an error, ``moving_pieces``'
+    motion of a measured block."""
+    return [float(np.mean(np.sqrt(np.mean(part**2, axis=0)) / scale)) for part in np.array_split(x, k)]
 
 
 def pieces_per_block(segs, piece: int) -> np.ndarray:
